@@ -1,0 +1,90 @@
+"""The ``parsim`` command.
+
+    parsim run JOB [--output DIR] [--quiet]   run (or resume) a job, on one rank or under mpiexec
+    parsim validate JOB                       check a job file, compute nothing
+    parsim info OUTPUT                        what an output folder holds and how far its job got
+
+Errors a user can cause are printed as one line, without a traceback, with a
+non-zero exit status.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+from parsim.errors import ParsimError
+
+EXIT_USER_ERROR = 2
+EXIT_TASK_FAILED = 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="parsim", description="Particle piles and clusters, run as MPI ensembles.")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = commands.add_parser("run", help="run or resume a job (use mpiexec -n K for K ranks)")
+    run.add_argument("job", type=Path, help="job file (TOML)")
+    run.add_argument("--output", type=Path, help="output folder (overrides the job's 'output')")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    validate = commands.add_parser("validate", help="check a job file without computing anything")
+    validate.add_argument("job", type=Path)
+
+    info = commands.add_parser("info", help="describe an output folder")
+    info.add_argument("output", type=Path, help="output folder of a job")
+
+    args = parser.parse_args(argv)
+    try:
+        return {"run": _run, "validate": _validate, "info": _info}[args.command](args)
+    except ParsimError as error:
+        _print_error(str(error))
+        return EXIT_USER_ERROR
+
+
+def _run(args) -> int:
+    from parsim.job import load_job
+    from parsim.parallel.scheduler import TaskFailed
+    from parsim.runner import run_job
+    from parsim.solvers import SOLVERS
+
+    job = load_job(args.job, SOLVERS, output=args.output)
+    try:
+        path = run_job(job, progress=not args.quiet)
+    except TaskFailed as failure:
+        _print_error(str(failure))
+        return EXIT_TASK_FAILED
+    if _is_rank_zero():
+        print(f"dataset: {path}")
+    return 0
+
+
+def _validate(args) -> int:
+    from parsim.job import load_job
+    from parsim.solvers import SOLVERS
+
+    job = load_job(args.job, SOLVERS)
+    print(f"{args.job}: valid {job.kind} job '{job.name}': {job.n_points} parameter points x "
+          f"{job.realizations} realizations = {len(job.tasks())} tasks, output in {job.output}")
+    return 0
+
+
+def _info(args) -> int:
+    from parsim.report import describe_output
+
+    print(describe_output(args.output))
+    return 0
+
+
+def _is_rank_zero() -> bool:
+    from mpi4py import MPI
+
+    return MPI.COMM_WORLD.Get_rank() == 0
+
+
+def _print_error(message: str) -> None:
+    if _is_rank_zero():
+        print(f"parsim: error: {message}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,196 @@
+"""Job files: reading, validation, and the tasks a job is made of.
+
+A job file is TOML::
+
+    name = "quickstart"            # names the dataset file
+    kind = "aggregation"           # which solver (see parsim.solvers)
+    seed = 2024                    # job seed; every task's stream derives from it
+    realizations = 4               # realisations per parameter point
+    output = "output/quickstart"   # folder, relative to the working directory
+
+    [parameters]                   # fixed parameters of the solver
+    radius = 0.2
+
+    [sweep]                        # lists; their Cartesian product is the grid
+    n_spheres = [100, 400]
+
+Every key is checked against the solver's declared parameters before anything
+is computed; errors name the key and the allowed values.
+"""
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from parsim.errors import JobError
+from parsim.solver import Solver
+
+TOP_LEVEL_KEYS = ("name", "kind", "seed", "realizations", "output", "parameters", "sweep")
+REQUIRED_TOP_LEVEL = ("name", "kind", "seed", "realizations")
+MAX_SEED = 2**63 - 1
+
+
+@dataclass(frozen=True)
+class Task:
+    """One (parameter point, realisation); ``point`` is the flat index in the sweep grid."""
+
+    point: int
+    realization: int
+
+    @property
+    def label(self) -> str:
+        return f"p{self.point:04d}_r{self.realization:04d}"
+
+
+@dataclass(frozen=True)
+class Job:
+    """A validated job: everything the runner needs, nothing computed yet."""
+
+    name: str
+    kind: str
+    seed: int
+    realizations: int
+    output: Path
+    fixed: dict[str, Any]  # every non-swept parameter, defaults filled in
+    sweep: dict[str, list]  # swept parameter -> values, in file order
+    text: str  # the job file as written
+
+    @property
+    def sweep_shape(self) -> tuple[int, ...]:
+        return tuple(len(values) for values in self.sweep.values())
+
+    @property
+    def n_points(self) -> int:
+        return int(np.prod(self.sweep_shape, dtype=np.int64))
+
+    def point_parameters(self, point: int) -> dict[str, Any]:
+        """All parameters of sweep point ``point`` (row-major over the sweep, last key fastest)."""
+        index = np.unravel_index(point, self.sweep_shape) if self.sweep else ()
+        swept = {name: values[i] for (name, values), i in zip(self.sweep.items(), index)}
+        return {**self.fixed, **swept}
+
+    def tasks(self) -> list[Task]:
+        return [Task(p, r) for p in range(self.n_points) for r in range(self.realizations)]
+
+    def seed_sequence(self, task: Task, solver: Solver) -> np.random.SeedSequence:
+        """The task's seed: job seed and task indices, never the rank.
+
+        The point index counts only the swept parameters that affect the seed,
+        so tasks that differ only in the method share their initial condition.
+        """
+        seeded = [name for name in self.sweep if solver.parameter(name).affects_seed]
+        index = np.unravel_index(task.point, self.sweep_shape) if self.sweep else ()
+        by_name = dict(zip(self.sweep, index))
+        shape = [len(self.sweep[name]) for name in seeded]
+        seed_point = int(np.ravel_multi_index([by_name[n] for n in seeded], shape)) if seeded else 0
+        return np.random.SeedSequence(self.seed, spawn_key=(seed_point, task.realization))
+
+    def describe_point(self, point: int) -> str:
+        params = self.point_parameters(point)
+        return ", ".join(f"{name}={params[name]!r}" for name in self.sweep) or "the single point"
+
+
+def load_job(path: str | Path, solvers: dict[str, Solver], output: str | Path | None = None) -> Job:
+    """Read and validate a job file; ``output`` overrides the file's output folder."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as error:
+        raise JobError(f"cannot read job file {path}: {error.strerror}") from None
+    return parse_job(text, solvers, source=str(path), output=output)
+
+
+def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", output=None) -> Job:
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise JobError(f"{source}: not valid TOML: {error}") from None
+
+    def fail(message: str):
+        raise JobError(f"{source}: {message}")
+
+    unknown = [key for key in document if key not in TOP_LEVEL_KEYS]
+    if unknown:
+        fail(f"unknown key {unknown[0]!r}; allowed top-level keys: {', '.join(TOP_LEVEL_KEYS)}")
+    for key in REQUIRED_TOP_LEVEL:
+        if key not in document:
+            fail(f"missing key {key!r}")
+
+    name = _top(document, "name", str, fail)
+    if not name or any(c in name for c in "/\\") or name.startswith("."):
+        fail(f"name = {name!r}: must be a non-empty file name without slashes")
+    kind = _top(document, "kind", str, fail)
+    if kind not in solvers:
+        fail(f"kind = {kind!r}: allowed: {', '.join(repr(k) for k in solvers)}")
+    solver = solvers[kind]
+    seed = _top(document, "seed", int, fail)
+    if not 0 <= seed <= MAX_SEED:
+        fail(f"seed = {seed}: allowed: an integer, 0 <= seed <= {MAX_SEED}")
+    realizations = _top(document, "realizations", int, fail)
+    if realizations < 1:
+        fail(f"realizations = {realizations}: allowed: an integer >= 1")
+    out = output if output is not None else document.get("output", f"output/{name}")
+    if not isinstance(out, (str, Path)):
+        fail(f"output = {out!r}: must be a string (a folder path)")
+
+    fixed_table = _table(document, "parameters", fail)
+    sweep_table = _table(document, "sweep", fail)
+    declared = {p.name: p for p in solver.parameters}
+    for table_name, table in (("parameters", fixed_table), ("sweep", sweep_table)):
+        for key in table:
+            if key not in declared:
+                fail(f"[{table_name}] unknown key {key!r}; allowed keys for kind {kind!r}: {', '.join(declared)}")
+    both = set(fixed_table) & set(sweep_table)
+    if both:
+        fail(f"{sorted(both)[0]!r} is both in [parameters] and in [sweep]; give it in one of them")
+
+    sweep = {}
+    for key, values in sweep_table.items():
+        parameter = declared[key]
+        if not parameter.sweepable:
+            fail(f"[sweep] {key!r} cannot be swept (it changes the shape of the outputs); set it in [parameters]")
+        if not isinstance(values, list) or not values:
+            fail(f"[sweep] {key} = {values!r}: must be a non-empty list of values")
+        coerced = [parameter.coerce(v, f"{source}: [sweep] {key}[{i}]") for i, v in enumerate(values)]
+        if len(set(coerced)) != len(coerced):
+            fail(f"[sweep] {key} = {values!r}: values must be distinct")
+        sweep[key] = coerced
+
+    fixed = {}
+    for parameter in solver.parameters:
+        if parameter.name in sweep:
+            continue
+        if parameter.name in fixed_table:
+            fixed[parameter.name] = parameter.coerce(fixed_table[parameter.name], f"{source}: [parameters] {parameter.name}")
+        elif parameter.required:
+            fail(f"parameter {parameter.name!r} is required ({parameter.description}); "
+                 f"give it in [parameters] or [sweep]; allowed: {parameter.allowed()}")
+        else:
+            fixed[parameter.name] = parameter.default
+
+    job = Job(name=name, kind=kind, seed=seed, realizations=realizations, output=Path(out),
+              fixed=fixed, sweep=sweep, text=text)
+    for point in range(job.n_points):
+        try:
+            solver.check(job.point_parameters(point))
+        except JobError as error:
+            fail(f"sweep point {job.describe_point(point)}: {error}")
+    return job
+
+
+def _top(document: dict, key: str, expected: type, fail) -> Any:
+    value = document[key]
+    if not isinstance(value, expected) or isinstance(value, bool):
+        fail(f"{key} = {value!r}: must be {'an integer' if expected is int else 'a string'}")
+    return value
+
+
+def _table(document: dict, key: str, fail) -> dict:
+    table = document.get(key, {})
+    if not isinstance(table, dict):
+        fail(f"{key} must be a table [{key}], got {table!r}")
+    return table
+

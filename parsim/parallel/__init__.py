@@ -1,0 +1,1 @@
+"""Everything that knows about MPI. Works with one rank and without mpiexec."""

@@ -1,0 +1,142 @@
+"""Dynamic task scheduling over MPI ranks, with every rank computing.
+
+Tasks ``0 .. n_tasks-1`` are handed out one at a time, in index order (the
+caller orders them by decreasing cost), to whichever rank asks first.  No rank
+is a pure master: rank 0 computes tasks in its main thread while a small server
+thread answers the other ranks' requests.  The solvers' numba kernels release
+the GIL, so the server answers within about a millisecond even while rank 0
+computes.  This keeps every core busy when task costs differ 100-fold, which a
+static split cannot.
+
+Failure: an exception in a task on any rank prints that rank's message and
+calls ``MPI_Abort``, which ends every rank at once; no rank waits forever.
+Files of tasks already finished are complete on disk (they are written under a
+temporary name and renamed), so nothing finished is lost.  On a single rank the
+exception is raised as :class:`TaskFailed` instead.
+"""
+
+import sys
+import threading
+import time
+import traceback
+from typing import Callable
+
+from mpi4py import MPI
+
+REQUEST_TAG = 1
+REPLY_TAG = 2
+NO_MORE_TASKS = -1
+POLL_SECONDS = 1e-3  # how often rank 0's server thread looks for requests
+
+
+class TaskFailed(Exception):
+    """A task raised; the message says which task, on which rank, and why."""
+
+
+class _TaskCounter:
+    """The next task index, shared by rank 0's two threads."""
+
+    def __init__(self, n_tasks: int):
+        self._next = 0
+        self._n_tasks = n_tasks
+        self._lock = threading.Lock()
+
+    def take(self) -> int:
+        with self._lock:
+            if self._next >= self._n_tasks:
+                return NO_MORE_TASKS
+            self._next += 1
+            return self._next - 1
+
+
+def run_tasks(
+    comm: MPI.Comm,
+    n_tasks: int,
+    work: Callable[[int], None],
+    on_finished: Callable[[int, int], None] | None = None,
+    describe_failure: Callable[[int, Exception], str] | None = None,
+) -> None:
+    """Run ``work(k)`` for every ``k`` in ``range(n_tasks)`` on the ranks of ``comm``.
+
+    ``on_finished(k, rank)`` is called on rank 0 (from either of its threads,
+    never concurrently) when task ``k`` has finished on ``rank``;
+    ``describe_failure(k, error)`` words the message of a failed task (default:
+    the task index and the traceback).  Collective: every rank of ``comm`` calls
+    it and it returns when all tasks are done.
+    """
+    if MPI.Query_thread() < MPI.THREAD_MULTIPLE and comm.Get_size() > 1:
+        raise RuntimeError("parsim's scheduler needs an MPI library initialised with MPI_THREAD_MULTIPLE")
+    describe_failure = describe_failure or _traceback_message
+    finished_lock = threading.Lock()
+
+    def finished(k: int, rank: int) -> None:
+        if on_finished is not None:
+            with finished_lock:
+                on_finished(k, rank)
+
+    def run_one(k: int) -> None:
+        try:
+            work(k)
+        except Exception as error:  # noqa: BLE001 - every failure must end the job with its message
+            _fail(comm, f"{describe_failure(k, error)} (on rank {comm.Get_rank()})")
+
+    if comm.Get_size() == 1:
+        for k in range(n_tasks):
+            run_one(k)
+            finished(k, 0)
+        return
+
+    sched = comm.Dup()  # private tags: the scheduler never sees other messages
+    try:
+        if sched.Get_rank() == 0:
+            counter = _TaskCounter(n_tasks)
+            server = threading.Thread(target=_serve, args=(sched, counter, finished), daemon=True)
+            server.start()
+            while (k := counter.take()) != NO_MORE_TASKS:
+                run_one(k)
+                finished(k, 0)
+            server.join()
+        else:
+            done = None
+            while True:
+                sched.send(done, dest=0, tag=REQUEST_TAG)
+                k = sched.recv(source=0, tag=REPLY_TAG)
+                if k == NO_MORE_TASKS:
+                    break
+                run_one(k)
+                done = k
+    finally:
+        sched.Free()
+
+
+def _serve(sched: MPI.Comm, counter: _TaskCounter, finished: Callable[[int, int], None]) -> None:
+    """Rank 0's server thread: answer each request with the next task, until every rank is told to stop."""
+    try:
+        still_asking = sched.Get_size() - 1
+        status = MPI.Status()
+        while still_asking:
+            if not sched.Iprobe(source=MPI.ANY_SOURCE, tag=REQUEST_TAG):
+                time.sleep(POLL_SECONDS)
+                continue
+            done = sched.recv(source=MPI.ANY_SOURCE, tag=REQUEST_TAG, status=status)
+            rank = status.Get_source()
+            if done is not None:
+                finished(done, rank)
+            k = counter.take()
+            sched.send(k, dest=rank, tag=REPLY_TAG)
+            if k == NO_MORE_TASKS:
+                still_asking -= 1
+    except Exception as error:  # noqa: BLE001 - a dead server would leave ranks waiting forever
+        _fail(sched, f"the task server on rank 0 failed: {_traceback_message(-1, error)}")
+
+
+def _traceback_message(k: int, error: Exception) -> str:
+    return f"task {k} failed: " + "".join(traceback.format_exception(error)).rstrip()
+
+
+def _fail(comm: MPI.Comm, message: str) -> None:
+    if comm.Get_size() == 1:
+        raise TaskFailed(message)
+    sys.stdout.flush()
+    print(f"\nparsim: error: {message}", file=sys.stderr, flush=True)
+    comm.Abort(1)

@@ -1,0 +1,87 @@
+"""Declared parameters of a solver: type, default, allowed values, units.
+
+A solver lists its parameters as :class:`Parameter` objects.  The same list
+validates job files (with messages that name the field and the allowed values),
+writes the job file reference, and gives the dataset coordinates their units.
+"""
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from parsim.errors import JobError
+
+REQUIRED = object()
+"""Default of a parameter that every job must give."""
+
+_TYPE_NAMES = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One model or run parameter of a solver (a ``default`` of None: may be left unset).
+
+    ``low``/``high`` bound numbers (``*_inclusive`` says whether the bound itself
+    is allowed); ``choices`` lists the allowed strings or numbers.  A parameter
+    with ``sweepable=False`` changes the shape of the outputs and must be fixed
+    for the whole job.  ``affects_seed=False`` marks a choice of method: tasks
+    that differ only in it get the same random stream, hence the same initial
+    condition, so methods can be compared task by task.
+    """
+
+    name: str
+    type: type
+    default: Any
+    units: str
+    description: str
+    low: float | None = None
+    high: float | None = None
+    low_inclusive: bool = True
+    high_inclusive: bool = True
+    choices: tuple | None = None
+    sweepable: bool = True
+    affects_seed: bool = True
+
+    @property
+    def required(self) -> bool:
+        return self.default is REQUIRED
+
+    def allowed(self) -> str:
+        """The allowed values, as the error messages and the docs state them."""
+        if self.choices is not None:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        parts = []
+        if self.low is not None:
+            parts.append(f"{_fmt(self.low)} {'<=' if self.low_inclusive else '<'} ")
+        parts.append(self.name)
+        if self.high is not None:
+            parts.append(f" {'<=' if self.high_inclusive else '<'} {_fmt(self.high)}")
+        text = "".join(parts)
+        return f"{_TYPE_NAMES[self.type]}, {text}" if len(parts) > 1 else _TYPE_NAMES[self.type]
+
+    def coerce(self, value: Any, where: str) -> Any:
+        """Return ``value`` as this parameter's type, or raise JobError naming ``where``."""
+        if self.type is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if self.type is int and isinstance(value, float) and value.is_integer() and abs(value) < 2**53:
+            value = int(value)
+        if not isinstance(value, self.type) or (self.type is not bool and isinstance(value, bool)):
+            raise JobError(f"{where} = {value!r}: must be {_TYPE_NAMES[self.type]}; allowed: {self.allowed()}")
+        if self.type is float and math.isnan(value):
+            raise JobError(f"{where} = nan: allowed: {self.allowed()}")
+        if self.choices is not None and value not in self.choices:
+            raise JobError(f"{where} = {value!r}: allowed: {self.allowed()}")
+        if self.type in (int, float) and not self._in_range(value):
+            raise JobError(f"{where} = {value!r} is out of range; allowed: {self.allowed()}")
+        return value
+
+    def _in_range(self, value: float) -> bool:
+        if self.low is not None and (value < self.low or (value == self.low and not self.low_inclusive)):
+            return False
+        if self.high is not None and (value > self.high or (value == self.high and not self.high_inclusive)):
+            return False
+        return True
+
+
+def _fmt(number: float) -> str:
+    return repr(number) if not isinstance(number, float) or not number.is_integer() else str(int(number))

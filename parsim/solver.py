@@ -1,0 +1,94 @@
+"""What a solver is to the job runner.
+
+The runner is generic: a solver is one function from (parameters, random
+generator) to a :class:`TaskResult` (statistics and final configuration), plus
+the declarations the runner needs to validate jobs and lay out the dataset.
+Every solver in :mod:`parsim.solvers` is a :class:`Solver`; adding one needs no
+change to the scheduler, the output or the command line.
+"""
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from parsim.parameters import Parameter
+
+LENGTH_UNITS = "job_length_unit"
+TIME_UNITS = "job_time_unit"
+
+
+@dataclass(frozen=True)
+class Statistic:
+    """One per-task output variable of the dataset.
+
+    ``dims`` are the observable dimensions after (sweep..., realization);
+    ``dtype`` is the stored type.  ``measured=True`` marks a machine-dependent
+    timing, the only kind of variable allowed to differ between two runs of
+    the same job.  ``attrs`` adds CF attributes (e.g. flag values).
+    """
+
+    name: str
+    units: str
+    long_name: str
+    dims: tuple[str, ...] = ()
+    dtype: str = "float64"
+    measured: bool = False
+    attrs: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Coordinate:
+    """Values and CF attributes of an observable dimension."""
+
+    values: np.ndarray
+    units: str
+    long_name: str
+
+
+@dataclass
+class Configuration:
+    """A final configuration, laid out as the HDF5 snapshot of DESIGN.md.
+
+    ``arrays`` maps HDF5 paths (``"spheres/position"``, ``"links"``, ...) to
+    arrays; ``attrs`` are extra root attributes (``floor_z``, ...).
+    """
+
+    arrays: dict[str, np.ndarray]
+    box_lower: np.ndarray
+    box_upper: np.ndarray
+    periodic: np.ndarray
+    attrs: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class TaskResult:
+    """What one task returns: one value per declared statistic, and its configuration."""
+
+    statistics: dict[str, np.ndarray | float | int]
+    configuration: Configuration
+
+
+@dataclass(frozen=True)
+class Solver:
+    """A kind of job.
+
+    - ``parameters``: every parameter a job of this kind may set;
+    - ``statistics``: the per-task variables of the dataset;
+    - ``coordinates(fixed)``: the observable coordinates, from the fixed parameters;
+    - ``check(params)``: cross-field checks of one parameter point (raise JobError);
+    - ``cost(params)``: relative cost estimate, so the costliest tasks start first;
+    - ``solve(params, rng)``: run one task.
+    """
+
+    kind: str
+    description: str
+    parameters: tuple[Parameter, ...]
+    statistics: tuple[Statistic, ...]
+    coordinates: Callable[[dict], dict[str, Coordinate]]
+    check: Callable[[dict], None]
+    cost: Callable[[dict], float]
+    solve: Callable[[dict, np.random.Generator], TaskResult]
+
+    def parameter(self, name: str) -> Parameter:
+        return next(p for p in self.parameters if p.name == name)

@@ -1,0 +1,158 @@
+"""Ballistic aggregation of hard spheres (Degond, Dimarco, Ferreira & Hecht 2024).
+
+One task: N spheres on a lattice filling the box [0, L]^d with random velocities
+(section 4.1, or the supplementary's variant), aggregated until one cluster
+remains (section 2), then the shape statistics of section 4.2 measured on the
+final configuration.  ``method = "ed"`` is the exact event-driven method.
+"""
+
+import math
+
+import numpy as np
+
+from parsim.core.aggregation_ed import simulate_ed
+from parsim.core.initial import isotropic_velocities, lattice_positions, lattice_spacing, uniform_cube_velocities
+from parsim.core.statistics import cluster_statistics, pair_distribution_grid
+from parsim.errors import JobError, NumericalError
+from parsim.parameters import REQUIRED, Parameter
+from parsim.solver import LENGTH_UNITS, TIME_UNITS, Configuration, Coordinate, Solver, Statistic, TaskResult
+
+PAPER_INITIAL_CONDITION = "lattice_isotropic"  # section 4.1: lattice filling the box, eq. 4.3 velocities
+SUPPLEMENTARY_INITIAL_CONDITION = "unit_lattice_uniform"  # supplementary A: spacing 1, V uniform in [-1/2, 1/2]^d
+STOP_REASONS = ("single_cluster", "max_time", "max_events")
+
+PARAMETERS = (
+    Parameter("method", str, "ed", "1", "aggregation method: 'ed' event-driven (exact)",
+              choices=("ed",), affects_seed=False),
+    Parameter("dimension", int, 2, "1", "space dimension d", choices=(2, 3), sweepable=False),
+    Parameter("n_spheres", int, REQUIRED, "1", "number of spheres N", low=2),
+    Parameter("volume_fraction", float, None, "1",
+              "volume fraction V_f; sets the box length L = R (N pi / V_f)^(1/2) in 2D (Table 1), "
+              "L = R (4 pi N / (3 V_f))^(1/3) in 3D",
+              low=0.0, high=1.0, low_inclusive=False, high_inclusive=False),
+    Parameter("initial_condition", str, PAPER_INITIAL_CONDITION, "1",
+              "initial condition: 'lattice_isotropic' (section 4.1: lattice filling the box, speeds |V|, "
+              "uniformly random directions, eq. 4.3) or 'unit_lattice_uniform' (supplementary A: lattice "
+              "of spacing 1, box length ceil(N^(1/d)), velocities uniform in [-1/2, 1/2]^d)",
+              choices=(PAPER_INITIAL_CONDITION, SUPPLEMENTARY_INITIAL_CONDITION)),
+    Parameter("radius", float, 0.2, LENGTH_UNITS, "sphere radius R", low=0.0, low_inclusive=False),
+    Parameter("mass", float, 1.0, "1", "sphere mass m", low=0.0, low_inclusive=False),
+    Parameter("speed", float, 1.0, f"{LENGTH_UNITS} {TIME_UNITS}-1", "initial speed |V| (eq. 4.3)",
+              low=0.0, low_inclusive=False),
+    Parameter("max_time", float, math.inf, TIME_UNITS, "stop at this time if several clusters remain",
+              low=0.0, low_inclusive=False),
+    Parameter("max_events", int, 10**10, "1", "stop after this many events if several clusters remain", low=1),
+    Parameter("contact_factor", float, 2.1, "1", "alpha_R of eq. 4.6: centres closer than alpha_R R are in contact",
+              low=2.0),
+    Parameter("pair_distribution_points", int, 72, "1", "number of r values of P(r) on 2R < r <= 20R (eq. 4.7)",
+              low=2, sweepable=False),
+    Parameter("box_levels", int, 12, "1", "box-counting levels m = 1..box_levels, eps_m = L / 2^m (eq. 4.8)",
+              low=2, high=30, sweepable=False),
+)
+
+STATISTICS = (
+    Statistic("box_length", LENGTH_UNITS, "box length L"),
+    Statistic("aspect_ratio", "1", "aspect ratio A_r of the final configuration (eq. 4.4)"),
+    Statistic("orientation", "1", "orientation D, leading eigenvector of the gyration tensor (eq. 4.5)",
+              dims=("component",)),
+    Statistic("contact_number", "1", "relative average number of contacts per sphere N_c (eq. 4.6)"),
+    Statistic("pair_distribution", "1", "pair distribution P(r), mean number of spheres within r (eq. 4.7)",
+              dims=("r",)),
+    Statistic("box_count", "1", "number of boxes of side eps holding a sphere centre (eq. 4.8)", dims=("box_size",)),
+    Statistic("fractal_dimension", "1", "box-counting fractal dimension D_f, fitted on 3R <= eps <= L/2 (eq. 4.8)"),
+    Statistic("fractal_prefactor", "1", f"prefactor a of eq. 4.8 with eps in {LENGTH_UNITS}"),
+    Statistic("radius_of_gyration", LENGTH_UNITS, "radius of gyration of the final configuration"),
+    Statistic("final_time", TIME_UNITS, "simulated time reached"),
+    Statistic("n_clusters", "1", "number of clusters at the end", dtype="int64"),
+    Statistic("n_events", "1", "number of events processed", dtype="int64"),
+    Statistic("n_collisions", "1", "number of cluster merges", dtype="int64"),
+    Statistic("n_wall_reflections", "1", "number of cluster reflections at the box walls", dtype="int64"),
+    Statistic("stop_reason", "1", "why the run stopped", dtype="int8",
+              attrs={"flag_values": np.arange(len(STOP_REASONS), dtype=np.int8),
+                     "flag_meanings": " ".join(STOP_REASONS)}),
+)
+
+
+def box_length(params: dict) -> float:
+    """L from the volume fraction (Table 1), or the unit lattice of supplementary A."""
+    n, d, radius = params["n_spheres"], params["dimension"], params["radius"]
+    if params["initial_condition"] == SUPPLEMENTARY_INITIAL_CONDITION:
+        return float(math.ceil(round(n ** (1.0 / d), 9)))
+    sphere_volume = math.pi * radius**2 if d == 2 else 4.0 / 3.0 * math.pi * radius**3
+    return (n * sphere_volume / params["volume_fraction"]) ** (1.0 / d)
+
+
+def check(params: dict) -> None:
+    """Cross-field checks of one parameter point; the lattice must fit (condition 4.2)."""
+    initial = params["initial_condition"]
+    if initial == PAPER_INITIAL_CONDITION and params["volume_fraction"] is None:
+        raise JobError("volume_fraction is required with initial_condition = 'lattice_isotropic' "
+                       "(it sets the box length, Table 1); allowed: 0 < volume_fraction < 1")
+    if initial == SUPPLEMENTARY_INITIAL_CONDITION and params["volume_fraction"] is not None:
+        raise JobError("volume_fraction must not be given with initial_condition = 'unit_lattice_uniform' "
+                       "(the box length follows from the unit lattice spacing)")
+    spacing = lattice_spacing(params["n_spheres"], params["dimension"], box_length(params))
+    if not spacing > 2.0 * params["radius"]:
+        raise JobError(f"the initial lattice does not fit in the box: spacing {spacing:.6g} must exceed the "
+                       f"diameter 2R = {2 * params['radius']:.6g} (condition 4.2, L^d > (2R)^d N); "
+                       "lower volume_fraction or radius")
+
+
+def coordinates(fixed: dict) -> dict[str, Coordinate]:
+    components = ("x", "y", "z")[: fixed["dimension"]]
+    r_over_radius = pair_distribution_grid(1.0, fixed["pair_distribution_points"])
+    levels = np.arange(1, fixed["box_levels"] + 1)
+    return {
+        "component": Coordinate(np.array(components), "1", "Cartesian component"),
+        "r": Coordinate(r_over_radius, "1", "pair distance r in units of the sphere radius R"),
+        "box_size": Coordinate(2.0 ** -levels, "1", "box side relative to the box length, eps_m / L = 2^-m"),
+    }
+
+
+def cost(params: dict) -> float:
+    return float(params["n_spheres"]) ** 1.3
+
+
+def solve(params: dict, rng: np.random.Generator) -> TaskResult:
+    n, d, radius = params["n_spheres"], params["dimension"], params["radius"]
+    length = box_length(params)
+    positions = lattice_positions(n, d, length, rng)
+    if params["initial_condition"] == PAPER_INITIAL_CONDITION:
+        velocities = isotropic_velocities(n, d, params["speed"], rng)
+    else:
+        velocities = uniform_cube_velocities(n, d, rng)
+    radii = np.full(n, radius)
+    masses = np.full(n, params["mass"])
+
+    result = simulate_ed(positions, velocities, radii, masses, length,
+                         max_time=params["max_time"], max_events=params["max_events"])
+    if not (np.all(np.isfinite(result.positions)) and np.all(np.isfinite(result.velocities))):
+        raise NumericalError(f"non-finite positions or velocities after {result.n_events} events")
+
+    lower, upper = np.zeros(d), np.full(d, length)
+    shape = cluster_statistics(result.positions, radii, lower, upper,
+                               contact_factor=params["contact_factor"],
+                               r_values=pair_distribution_grid(radius, params["pair_distribution_points"]),
+                               box_levels=params["box_levels"])
+    statistics = {
+        "box_length": length,
+        **{name: shape[name] for name in ("aspect_ratio", "orientation", "contact_number", "pair_distribution",
+                                          "box_count", "fractal_dimension", "fractal_prefactor",
+                                          "radius_of_gyration")},
+        "final_time": result.time,
+        "n_clusters": int(result.cluster.max()) + 1,
+        "n_events": result.n_events,
+        "n_collisions": result.n_collisions,
+        "n_wall_reflections": result.n_wall_reflections,
+        "stop_reason": STOP_REASONS.index(result.stop_reason),
+    }
+    configuration = Configuration(
+        arrays={"spheres/position": result.positions, "spheres/radius": radii, "spheres/mass": masses,
+                "spheres/velocity": result.velocities, "spheres/cluster": result.cluster, "links": result.links},
+        box_lower=lower, box_upper=upper, periodic=np.zeros(d, dtype=bool))
+    return TaskResult(statistics, configuration)
+
+
+SOLVER = Solver(kind="aggregation", description="ballistic aggregation of hard spheres (Degond et al. 2024)",
+                parameters=PARAMETERS, statistics=STATISTICS, coordinates=coordinates, check=check,
+                cost=cost, solve=solve)
