@@ -61,7 +61,7 @@ def sierpinski_triangle(levels, radius):
 
 def brute_force_pair_distribution(x, r_values):
     distance = np.sqrt(((x[:, None, :] - x[None, :, :]) ** 2).sum(axis=-1))
-    return np.array([(distance <= r).sum() - len(x) for r in r_values]) / len(x)
+    return np.array([(distance <= r).sum() for r in r_values]) / len(x)  # i = j included, as eq. 4.7
 
 
 def brute_force_box_counts(x, lower, box_length, levels):
@@ -136,32 +136,33 @@ def test_ring_has_radius_of_gyration_equal_to_its_radius():
 
 
 def test_square_lattice_contacts():
-    n, radius = 7, 0.8  # 2 directions x n(n-1) bonds, each counted for both spheres
-    expected = 2 * 2 * n * (n - 1) / (n * n * 6)
+    n, radius = 7, 0.8  # 2 directions x n(n-1) bonds, each counted for both spheres, plus i = j
+    expected = (n * n + 2 * 2 * n * (n - 1)) / (n * n * 6)
     assert relative_contact_number(square_lattice(n, radius), radius) == pytest.approx(expected, rel=1e-14)
 
 
 def test_hexagonal_patch_contacts():
     p, q, radius = 6, 5, 1.3  # bonds along a1, a2 and a2 - a1
     bonds = (p - 1) * q + p * (q - 1) + (p - 1) * (q - 1)
-    expected = 2 * bonds / (p * q * 6)
+    expected = (p * q + 2 * bonds) / (p * q * 6)
     assert relative_contact_number(hexagonal_patch(p, q, radius), radius) == pytest.approx(expected, rel=1e-14)
 
 
 def test_cubic_lattice_contacts_use_n_max_12_in_3d():
     n, radius = 4, 1.0
-    expected = 2 * 3 * n * n * (n - 1) / (n**3 * 12)
+    expected = (n**3 + 2 * 3 * n * n * (n - 1)) / (n**3 * 12)
     assert relative_contact_number(square_lattice(n, radius, d=3), radius) == pytest.approx(expected, rel=1e-14)
 
 
 def test_chain_contacts_and_contact_factor():
     n, radius = 10, 1.0
     chain = line_of_discs(n, radius, (1.0, 0.0))
-    assert relative_contact_number(chain, radius) == pytest.approx(2 * (n - 1) / (n * 6), rel=1e-14)
+    expected = (n + 2 * (n - 1)) / (n * 6)  # tends to (1 + 2)/6 = 0.5, the paper's value for trees
+    assert relative_contact_number(chain, radius) == pytest.approx(expected, rel=1e-14)
     # alpha_R = 2.1 tolerates the small gaps left by the minimiser, not larger ones.
     gapped = chain * 1.04
-    assert relative_contact_number(gapped, radius) == pytest.approx(2 * (n - 1) / (n * 6), rel=1e-14)
-    assert relative_contact_number(chain * 1.1, radius) == 0.0
+    assert relative_contact_number(gapped, radius) == pytest.approx(expected, rel=1e-14)
+    assert relative_contact_number(chain * 1.1, radius) == pytest.approx(1 / 6, rel=1e-14)  # isolated: the self pair
 
 
 # --------------------------------------------------------------- pair distribution
@@ -173,7 +174,7 @@ def test_pair_distribution_matches_brute_force(d):
     x = rng.random((400, d)) * 10.0
     r_values = np.array([0.0, 0.3, 0.7, 1.0, 1.0, 2.5, 4.0, 20.0])
     np.testing.assert_allclose(pair_distribution(x, r_values), brute_force_pair_distribution(x, r_values))
-    assert pair_distribution(x, [20.0])[0] == len(x) - 1  # every other sphere within reach
+    assert pair_distribution(x, [20.0])[0] == len(x)  # every sphere within reach, itself included
 
 
 def test_pair_distribution_of_far_apart_clusters():

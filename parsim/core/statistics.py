@@ -185,12 +185,17 @@ def _pair_histogram(positions, lower, side, shape, stencil, r_squared):
     return histogram
 
 
-def _ordered_pair_counts(x, r_values):
-    """For each r: number of ordered pairs (i, j), i != j, with |X_i - X_j| <= r."""
+def _pair_counts(x, r_values):
+    """For each r: number of ordered pairs (i, j), i = j included, with |X_i - X_j| <= r.
+
+    The self pairs (i, i) are counted as the sums of eqs. 4.6 and 4.7 are printed: they
+    add n for every r >= 0.
+    """
     n, d = x.shape
     cutoff = r_values[-1]
+    self_pairs = np.where(r_values >= 0.0, float(n), 0.0)
     if n < 2 or cutoff < 0.0:
-        return np.zeros(r_values.shape[0])
+        return self_pairs
     lower = x.min(axis=0)
     extent = x.max(axis=0) - lower
     side = cutoff if cutoff > 0.0 else (extent.max() / n if extent.max() > 0.0 else 1.0)
@@ -199,17 +204,19 @@ def _ordered_pair_counts(x, r_values):
     shape = (np.floor(extent / side) + 1.0).astype(np.int64)
     r_squared = np.where(r_values >= 0.0, r_values * r_values, -1.0)  # r < 0 counts nothing
     histogram = _pair_histogram(x, lower, side, shape, _half_stencil(d), r_squared)
-    return 2.0 * np.cumsum(histogram).astype(np.float64)
+    return self_pairs + 2.0 * np.cumsum(histogram).astype(np.float64)
 
 
 def relative_contact_number(positions, radius, contact_factor=2.1, n_max=None):
     """Relative average number of contacts per sphere N_c (eq. 4.6).
 
-    N_c = (1/(n N_max)) sum_{i != j} 1{|X_i - X_j| <= contact_factor * radius}, over
-    ordered pairs: each contact is counted once for each of its two spheres, so N_c is the
-    mean number of contacts per sphere divided by N_max. A long chain gives 2/N_max
-    (= 1/3 in 2D; a chain of n spheres gives exactly 2(n-1)/(6n)), a dense hexagonal
-    packing 1: the paper's "between 1/6 and one".
+    N_c = (1/(n N_max)) sum_{i, j} 1{|X_i - X_j| <= contact_factor * radius}, the sum over
+    all ordered pairs *including i = j*, exactly as eq. 4.6 is printed. So N_c =
+    (1 + mean contacts per sphere) / N_max: an isolated sphere gives 1/6 in 2D, the lower
+    bound the paper states, and the tree-like clusters of the event-driven method (two
+    contacts per sphere) give (1 + 2)/6 = 0.5, the value the paper reports for both methods
+    (section 4.2.1); the mean number of contacts is N_max N_c - 1. A chain of n discs gives
+    exactly (1 + 2(n-1)/n)/6.
 
     ``radius`` is the scalar R (pass the mean radius for polydisperse spheres).
     ``n_max`` defaults to 6 in 2D and 12 in 3D.
@@ -219,15 +226,17 @@ def relative_contact_number(positions, radius, contact_factor=2.1, n_max=None):
         raise ValueError(f"radius and contact_factor must be > 0, got {radius}, {contact_factor}")
     if n_max is None:
         n_max = DEFAULT_N_MAX[x.shape[1]]
-    contacts = _ordered_pair_counts(x, np.array([contact_factor * radius], dtype=np.float64))
+    contacts = _pair_counts(x, np.array([contact_factor * radius], dtype=np.float64))
     return float(contacts[0] / (x.shape[0] * n_max))
 
 
 def pair_distribution(positions, r_values):
-    """Cumulative pair distribution P(r) = (1/n) sum_{i != j} 1{|X_i - X_j| <= r} (eq. 4.7).
+    """Cumulative pair distribution P(r) = (1/n) sum_{i, j} 1{|X_i - X_j| <= r} (eq. 4.7).
 
-    Evaluated at every r of the non-decreasing array ``r_values``; returns an array of the
-    same length. Each unordered pair is found once with a cell list and counted twice.
+    The sum includes i = j as printed (as in eq. 4.6), so P(r) = 1 + the mean number of
+    other spheres within r, for r >= 0. Evaluated at every r of the non-decreasing array
+    ``r_values``; returns an array of the same length. Each unordered pair i != j is found
+    once with a cell list and counted twice.
     """
     x = _as_positions(positions)
     r = np.ascontiguousarray(r_values, dtype=np.float64)
@@ -237,7 +246,7 @@ def pair_distribution(positions, r_values):
         return np.zeros(0)
     if not np.all(np.isfinite(r)) or np.any(np.diff(r) < 0.0):
         raise ValueError("r_values must be finite and non-decreasing")
-    return _ordered_pair_counts(x, r) / x.shape[0]
+    return _pair_counts(x, r) / x.shape[0]
 
 
 def pair_distribution_grid(radius, points=72):
