@@ -63,7 +63,7 @@ def test_seed_depends_on_task_indices_only_and_not_on_the_method():
     (("n_spheres = [100, 400]", "box_levels = [8, 9]\nn_spheres = [100, 400]"), "'box_levels' cannot be swept"),
     (("n_spheres = [100, 400]", "n_spheres = [100, 400]\nradius = [0.2]"), "'radius' is both in"),
     (("n_spheres = [100, 400]", ""), "parameter 'n_spheres' is required"),
-    (("[0.1, 0.2, 0.3]", "[0.1, 0.8]"), r"volume_fraction=0.8: the initial lattice does not fit .* condition 4.2"),
+    (("[0.1, 0.2, 0.3]", "[0.1, 0.8]"), r"volume_fraction=0.8: the initial lattice does not fit .*condition 4\.2"),
 ])
 def test_invalid_jobs_name_the_field_and_the_allowed_values(change, message):
     with pytest.raises(JobError, match=message):
@@ -87,3 +87,12 @@ def test_cli_rejects_an_invalid_job_without_traceback_and_computes_nothing(tmp_p
         assert "volume_fraction[0] = 2.0 is out of range" in result.stderr
         assert "Traceback" not in result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_every_parameter_is_in_the_job_reference():
+    reference = open("docs/jobs.md").read()
+    for solver in SOLVERS.values():
+        for parameter in solver.parameters:
+            assert f"| `{parameter.name}` |" in reference, parameter.name
+        for statistic in solver.statistics:
+            assert f"`{statistic.name}`" in reference, statistic.name
