@@ -11,7 +11,8 @@ import math
 import numpy as np
 
 from parsim.core.aggregation_ed import simulate_ed
-from parsim.core.initial import isotropic_velocities, lattice_positions, lattice_spacing, uniform_cube_velocities
+from parsim.core.initial import (box_length_for_volume_fraction, isotropic_velocities, lattice_positions,
+                                 lattice_sites_per_side, lattice_spacing, uniform_cube_velocities)
 from parsim.core.statistics import cluster_statistics, pair_distribution_grid
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import REQUIRED, Parameter
@@ -75,11 +76,10 @@ STATISTICS = (
 
 def box_length(params: dict) -> float:
     """L from the volume fraction (Table 1), or the unit lattice of supplementary A."""
-    n, d, radius = params["n_spheres"], params["dimension"], params["radius"]
+    n, d = params["n_spheres"], params["dimension"]
     if params["initial_condition"] == SUPPLEMENTARY_INITIAL_CONDITION:
-        return float(math.ceil(round(n ** (1.0 / d), 9)))
-    sphere_volume = math.pi * radius**2 if d == 2 else 4.0 / 3.0 * math.pi * radius**3
-    return (n * sphere_volume / params["volume_fraction"]) ** (1.0 / d)
+        return float(lattice_sites_per_side(n, d))  # spacing 1
+    return box_length_for_volume_fraction(n, d, params["radius"], params["volume_fraction"])
 
 
 def check(params: dict) -> None:

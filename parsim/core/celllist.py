@@ -1,0 +1,183 @@
+"""A fixed cell grid over the box ``[0, L]^d`` with per-cell doubly linked lists.
+
+The grid has ``k`` cells per side of side ``a = L / k >= cutoff``, so two points closer
+than ``cutoff`` lie in the same or in adjacent cells (the ``3^d`` block around a cell).
+Points outside the box are put in the nearest edge cell (clamping keeps that property:
+a clamped point is still farther than ``a`` from every point two or more cells away).
+
+Cells are numbered ``c = sum_a ix_a k^a``.  Each cell keeps a doubly linked list of the
+points binned in it (``head[c]``, ``next[i]``, ``prev[i]``, ``cell_of[i]``) and their
+number ``count[c]``, so moving one point from a cell to another is O(1).
+"""
+
+import math
+
+import numpy as np
+
+from parsim.core.jit import jit
+
+__all__ = [
+    "grid_size",
+    "neighbour_offsets",
+    "cell_index",
+    "build_cells",
+    "move_to_cell",
+    "block_cells",
+    "worst_overlap",
+]
+
+#: Upper bound on the number of cells per point, so that a dilute box in d = 3 does not
+#: allocate a huge grid (cells then grow beyond the cutoff, which stays correct).
+MAX_CELLS_PER_POINT = 8
+
+
+def grid_size(box_length, cutoff, dimension, n_points):
+    """Cells per side ``k`` and cell side ``a = box_length / k`` with ``a >= cutoff``.
+
+    ``k = floor(box_length / cutoff)``, at least 1, and at most what keeps ``k^d`` below
+    about ``MAX_CELLS_PER_POINT * n_points``.
+    """
+    k = max(1, int(math.floor(box_length / cutoff)))
+    cap = max(1, int(math.floor((MAX_CELLS_PER_POINT * n_points + 64) ** (1.0 / dimension))))
+    k = min(k, cap)
+    while k > 1 and box_length / k < cutoff:  # guard the floor against round-off
+        k -= 1
+    return k, box_length / k
+
+
+@jit
+def neighbour_offsets(dimension):
+    """The ``3^d`` offsets in ``{-1, 0, 1}^d`` as an int64 array of shape ``(3^d, d)``."""
+    count = 3**dimension
+    out = np.empty((count, dimension), dtype=np.int64)
+    for o in range(count):
+        q = o
+        for a in range(dimension):
+            out[o, a] = q % 3 - 1
+            q //= 3
+    return out
+
+
+@jit
+def cell_index(x, side, k):
+    """Linear index of the cell holding point ``x`` (clamped into the grid)."""
+    c = 0
+    mult = 1
+    for a in range(x.shape[0]):
+        q = int(math.floor(x[a] / side)) if x[a] > 0.0 else 0
+        if q > k - 1:
+            q = k - 1
+        c += q * mult
+        mult *= k
+    return c
+
+
+@jit
+def build_cells(x, side, k):
+    """Bin all points; returns ``head, next, prev, cell_of, count`` (-1 ends a list).
+
+    Points are pushed at the head of their cell in index order.
+    """
+    n, d = x.shape
+    head = np.full(k**d, -1, dtype=np.int64)
+    count = np.zeros(k**d, dtype=np.int64)
+    nxt = np.full(n, -1, dtype=np.int64)
+    prv = np.full(n, -1, dtype=np.int64)
+    cell_of = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        c = cell_index(x[i], side, k)
+        cell_of[i] = c
+        h = head[c]
+        nxt[i] = h
+        if h >= 0:
+            prv[h] = i
+        head[c] = i
+        count[c] += 1
+    return head, nxt, prv, cell_of, count
+
+
+@jit
+def move_to_cell(i, c, head, nxt, prv, cell_of, count):
+    """Move point ``i`` into cell ``c`` (no-op if it is there already)."""
+    old = cell_of[i]
+    if old == c:
+        return
+    count[old] -= 1
+    count[c] += 1
+    p = prv[i]
+    q = nxt[i]
+    if p >= 0:
+        nxt[p] = q
+    else:
+        head[old] = q
+    if q >= 0:
+        prv[q] = p
+    h = head[c]
+    nxt[i] = h
+    prv[i] = -1
+    if h >= 0:
+        prv[h] = i
+    head[c] = i
+    cell_of[i] = c
+
+
+@jit
+def block_cells(c, k, offsets, coords, out):
+    """Linear indices of the cells of the ``3^d`` block around cell ``c`` inside the grid.
+
+    Written to ``out`` (length >= 3^d); returns how many.  ``coords`` is scratch (d,).
+    """
+    d = coords.shape[0]
+    for a in range(d):
+        coords[a] = c % k
+        c //= k
+    m = 0
+    for o in range(offsets.shape[0]):
+        lin = 0
+        mult = 1
+        ok = True
+        for a in range(d):
+            q = coords[a] + offsets[o, a]
+            if q < 0 or q >= k:
+                ok = False
+                break
+            lin += q * mult
+            mult *= k
+        if ok:
+            out[m] = lin
+            m += 1
+    return m
+
+
+@jit
+def worst_overlap(x, radii, side, k):
+    """The pair with the smallest gap ``|x_i - x_j| - (r_i + r_j)`` among pairs in adjacent cells.
+
+    With ``side >= 2 max(r)`` every overlapping pair is examined.  Returns
+    ``(i, j, gap)`` with ``i < j``, or ``(-1, -1, inf)`` if no pair is in adjacent cells.
+    """
+    n, d = x.shape
+    head, nxt, prv, cell_of, count = build_cells(x, side, k)
+    offsets = neighbour_offsets(d)
+    coords = np.empty(d, dtype=np.int64)
+    block = np.empty(offsets.shape[0], dtype=np.int64)
+    best = np.inf
+    bi = -1
+    bj = -1
+    for i in range(n):
+        nb = block_cells(cell_of[i], k, offsets, coords, block)
+        for b in range(nb):
+            j = head[block[b]]
+            while j >= 0:
+                if j > i:
+                    s = 0.0
+                    for a in range(d):
+                        dx = x[i, a] - x[j, a]
+                        s += dx * dx
+                    gap = math.sqrt(s) - (radii[i] + radii[j])
+                    if gap < best:
+                        best = gap
+                        bi = i
+                        bj = j
+                j = nxt[j]
+    return bi, bj, best
