@@ -1,0 +1,53 @@
+"""Per-task HDF5 files: the final configuration and the task's statistics.
+
+Layout (DESIGN.md): ``spheres/position`` (n, d), ``spheres/radius`` (n,) and the
+solver's other arrays (``spheres/velocity``, ``spheres/cluster``, ``links``,
+``spheres/particle``, ...); root attributes ``box_lower``, ``box_upper``,
+``periodic``, the task's parameters and seed.  The group ``statistics`` holds one
+dataset per statistic of the task: it is what the job's netCDF dataset is
+assembled from, so a finished task file is also the resume record of its task.
+"""
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from parsim.output.atomic import written_atomically
+from parsim.solver import Configuration, TaskResult
+
+STATISTICS_GROUP = "statistics"
+
+
+def write_task_file(path: Path, result: TaskResult, attrs: dict) -> None:
+    """Write one task's configuration, statistics and ``attrs`` (parameters, seed) atomically."""
+    configuration = result.configuration
+    with written_atomically(path) as temporary:
+        with h5py.File(temporary, "w") as file:
+            for name, array in configuration.arrays.items():
+                file.create_dataset(name, data=np.asarray(array))
+            file.attrs["box_lower"] = np.asarray(configuration.box_lower, dtype=np.float64)
+            file.attrs["box_upper"] = np.asarray(configuration.box_upper, dtype=np.float64)
+            file.attrs["periodic"] = np.asarray(configuration.periodic, dtype=bool)
+            for name, value in {**configuration.attrs, **attrs}.items():
+                if value is not None:
+                    file.attrs[name] = value
+            group = file.create_group(STATISTICS_GROUP)
+            for name, value in result.statistics.items():
+                group.create_dataset(name, data=np.asarray(value))
+
+
+def read_statistics(path: Path) -> dict[str, np.ndarray]:
+    with h5py.File(path, "r") as file:
+        return {name: dataset[()] for name, dataset in file[STATISTICS_GROUP].items()}
+
+
+def read_configuration(path: Path) -> Configuration:
+    """The configuration of a task file, with every array of the snapshot."""
+    arrays = {}
+    with h5py.File(path, "r") as file:
+        file.visititems(lambda name, item: arrays.__setitem__(name, item[()])
+                        if isinstance(item, h5py.Dataset) and not name.startswith(STATISTICS_GROUP) else None)
+        attrs = {name: value for name, value in file.attrs.items()}
+    return Configuration(arrays=arrays, box_lower=attrs.pop("box_lower"), box_upper=attrs.pop("box_upper"),
+                         periodic=attrs.pop("periodic"), attrs=attrs)
