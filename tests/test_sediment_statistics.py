@@ -1,0 +1,88 @@
+"""Sediment statistics on packings whose answers are known analytically."""
+
+import numpy as np
+import pytest
+
+from parsim.core.sediment import coordination, filling_height, packing_fraction, packing_fraction_profile
+
+
+def simple_cubic(n, layers, radius):
+    """Touching spheres on a simple cubic lattice: n x n per layer in a periodic box of side 2Rn."""
+    i, j, k = np.meshgrid(np.arange(n), np.arange(n), np.arange(layers), indexing="ij")
+    return (2 * radius * np.column_stack([i.ravel(), j.ravel(), k.ravel()]) + radius), 2 * radius * n
+
+
+def face_centred_cubic(cells, layers, radius):
+    """FCC of touching spheres: cubic cell a = 2 sqrt(2) R with 4 sites."""
+    a = 2 * np.sqrt(2) * radius
+    basis = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
+    i, j, k = np.meshgrid(np.arange(cells), np.arange(cells), np.arange(layers), indexing="ij")
+    origins = np.column_stack([i.ravel(), j.ravel(), k.ravel()])
+    return a * (origins[:, None, :] + basis[None, :, :]).reshape(-1, 3) + [0, 0, radius], a * cells, a
+
+
+def test_simple_cubic_packing_fraction_is_pi_over_6():
+    radius = 0.5
+    x, side = simple_cubic(6, 8, radius)
+    phi = packing_fraction(x, np.full(len(x), radius), (0, 0), (side, side), 2.0, 6.0)  # four whole layers
+    assert phi == pytest.approx(np.pi / 6, abs=1e-3)
+
+
+def test_fcc_packing_fraction_and_twelve_contacts():
+    radius = 1.0
+    x, side, a = face_centred_cubic(4, 6, radius)
+    radii = np.full(len(x), radius)
+    phi = packing_fraction(x, radii, (0, 0), (side, side), radius + a, radius + 4 * a)  # three whole cells
+    assert phi == pytest.approx(np.pi / (3 * np.sqrt(2)), abs=1e-3)
+    own = np.arange(len(x))
+    mean, count = coordination(x, radii, own, x[:, 2], (0, 0), (side, side), radius + a, radius + 4 * a)
+    assert mean == 12.0 and count == 4 * 4 * 4 * 3  # every bulk sphere touches twelve, through the periodic sides
+
+
+def test_simple_cubic_has_six_contacts_between_particles_only():
+    radius, n, layers = 0.5, 6, 6
+    x, side = simple_cubic(n, layers, radius)
+    radii = np.full(len(x), radius)
+    mean, _ = coordination(x, radii, np.arange(len(x)), x[:, 2], (0, 0), (side, side), 1.0, 5.0)
+    assert mean == 6.0
+    # Neighbours along x glued into dimers: the glue is no contact between particles,
+    # so each dimer has 2 x 5 contacts.
+    i, j, k = (np.round((x - radius) / (2 * radius)).astype(np.int64)).T
+    dimer = ((i // 2) * n + j) * layers + k
+    com_z = np.bincount(dimer, weights=x[:, 2]) / 2
+    mean, count = coordination(x, radii, dimer, com_z, (0, 0), (side, side), 1.0, 5.0)
+    assert mean == 10.0 and count == (n // 2) * n * 4
+
+
+def test_gaps_beyond_the_tolerance_are_no_contacts():
+    radius = 1.0
+    x = np.array([[0.0, 0.0, 1.0], [2.0 + 1e-8, 0.0, 1.0], [0.0, 2.0 + 1e-4, 1.0]])
+    mean, count = coordination(x, np.full(3, radius), np.arange(3), x[:, 2], (-5, -5), (5, 5), 0.0, 2.0)
+    assert count == 3 and mean == pytest.approx(2 / 3)  # only the 1e-8 gap closes
+
+
+def test_profile_integrates_to_the_sphere_volume():
+    radius = 0.5
+    x, side = simple_cubic(4, 1, radius)  # one layer on the floor
+    edges = np.linspace(0.0, 2 * radius, 11)
+    profile = packing_fraction_profile(x, np.full(len(x), radius), (0, 0), (side, side), edges, samples=50_000)
+    z = 0.5 * (edges[1:] + edges[:-1])
+    exact = np.pi * (radius**2 - (z - radius) ** 2) / (2 * radius) ** 2  # section area / column area, at the slab middle
+    assert profile.mean() == pytest.approx(np.pi / 6, abs=2e-3)
+    np.testing.assert_allclose(profile, exact, atol=0.02)  # slab-averaged against mid-slab values
+
+
+def test_overlapping_spheres_are_counted_once():
+    radius = 1.0
+    single = np.array([[2.0, 2.0, 2.0]])
+    double = np.array([[2.0, 2.0, 2.0], [2.0, 2.0, 2.0]])  # the same sphere twice: the same covered volume
+    one = packing_fraction(single, [radius], (0, 0), (4, 4), 0.0, 4.0)
+    two = packing_fraction(double, [radius, radius], (0, 0), (4, 4), 0.0, 4.0)
+    assert one == two == pytest.approx(4 / 3 * np.pi / 64, abs=1e-3)
+
+
+def test_filling_height_is_twice_the_volume_weighted_centre():
+    assert filling_height([1.0, 3.0], [1.0, 1.0]) == 4.0
+    assert filling_height([1.0, 3.0], [3.0, 1.0]) == 3.0
+    with pytest.raises(ValueError):
+        filling_height([], [])
