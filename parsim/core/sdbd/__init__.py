@@ -1,0 +1,307 @@
+"""Event-driven steepest descent ballistic deposition (SDBD) of rigid multi-sphere particles.
+
+Topic & Poeschel (2016), sections 2-4: each particle, made of overlapping polydisperse
+spheres, is dropped above the sediment and follows the path of steepest descent of its
+centre of mass - falling, rolling on one contact, rolling on two - until it rests on three
+contacts, hangs on one or two, or (FLOOR_STOP) touches the floor.  Frustrated situations
+(4.1, trial angle), freezing by infinite cycling (4.2, criterion 34) and simultaneous
+events (4.3) are handled.
+
+Modules: :mod:`.rotation` (eq. 15, eqs. 13-14), :mod:`.events` (event solvers),
+:mod:`.decision` (steepest-descent choice), :mod:`.grid` (sediment grid),
+:mod:`.engine` (the deposition loop), :mod:`.constants`.
+
+The public entry point is :func:`deposit`.
+
+Where this implementation departs from, or makes precise, the printed paper:
+
+* eq. 14: the sign of ``sin phi`` is fixed by the right-hand rule about the axis,
+  ``sin phi = n . ((x - O) x (x' - O)) / (|x - O| |x' - O|)``;
+* events are ordered by their angle ``phi in [0, phi_hang]`` instead of by the height of
+  the centre of mass (equivalent: the centre of mass descends monotonically on that arc,
+  and ``phi <= phi_hang`` is eq. 16);
+* eqs. 25-30 (loss of one of two contacts) are derived for a general release: with
+  ``d = r_cm - P_x``, ``e = a_y - P_x``, ``f = a_y - P_y``, eq. 28 becomes
+  ``F = (d.f) e_z - f_z (d.e)``; ``A = d.e`` and ``B = d.f`` are constant during the
+  rotation about the axis through ``P_x`` and ``P_y``, so ``F = (B - A) z_ay - B z_Px + A z_Py``
+  and rolling on ``x`` alone becomes possible when ``F`` turns positive (eq. 30, a plane
+  for ``a_y``).  For a wall or floor contact ``y`` (pivot ``P_y = a_y``) the same
+  derivation gives a plane for the centre of mass;
+* eq. 31's virtual small rotation is the trial angle of 4.1 (the paper points to 4.1 for
+  it); a much smaller angle makes particles creep along the contact;
+* "steepest" is the slope ``-dz/ds`` of the path of the centre of mass;
+* criterion (34) is read as ``|Q - 1| < epsilon`` with ``Q = dz(k) dz(k-4) / (dz(k-1)
+  dz(k-3))`` and a decreasing ``dz``; it is also applied for periods 2 and 4, and a
+  period-free backstop (no descent in 24 steps) catches zigzags among obstacles at
+  round-off clearances.  The contacts "involved in the cycling" are all obstacles
+  within ``CYCLE_CLOSE_GAP`` of the particle;
+* touching obstacles: after any move, contacts released by the decision that still touch
+  remain contacts, and at rest obstacles within ``CYCLE_CLOSE_GAP`` become contacts and
+  the decision is taken again, so that rest is decided with every touching obstacle;
+* unstable equilibria (centre of mass straight above a pivot or above the axis of two)
+  are tipped about a fixed horizontal axis instead of balancing forever;
+* walls (and the floor under FLOOR_ROLL) pivot about the centre of the touching sphere
+  (no sliding); see :mod:`.engine`.
+
+Numba caches each kernel by its own source file: after editing :mod:`.decision`,
+:mod:`.events`, :mod:`.grid` or :mod:`.rotation`, delete the ``*.nbi``/``*.nbc`` files in
+``__pycache__`` so that :func:`engine.run_deposition` is recompiled.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from parsim.core.sdbd.constants import (
+    EVENT_KINDS,
+    EVENT_LIMIT,
+    FLOOR_ROLL,
+    FLOOR_STOP,
+    HANGING_ONE,
+    HANGING_TWO,
+    LATERAL_NONE,
+    LATERAL_PERIODIC,
+    LATERAL_WALLS,
+    N_EVENT_KINDS,
+    RESTING_ON_FLOOR,
+    RESTING_THREE_CONTACTS,
+    STATE_NAMES,
+)
+
+__all__ = [
+    "deposit",
+    "deposit_with_diagnostics",
+    "DepositionResult",
+    "EVENT_KINDS",
+    "STATE_NAMES",
+    "LATERAL_PERIODIC",
+    "LATERAL_WALLS",
+    "LATERAL_NONE",
+    "FLOOR_STOP",
+    "FLOOR_ROLL",
+    "RESTING_THREE_CONTACTS",
+    "RESTING_ON_FLOOR",
+    "HANGING_ONE",
+    "HANGING_TWO",
+    "EVENT_LIMIT",
+]
+
+
+class DepositionResult(NamedTuple):
+    """Outcome of :func:`deposit` (only the particles deposited before ``stopped_at``).
+
+    positions      (n, 3) sphere centres of the sediment
+    radii          (n,)
+    particle       (n,) int64 particle of each sphere (contiguous, deposition order)
+    center_of_mass (P, 3)
+    rotation       (P, 4) final orientation quaternion (w, x, y, z): the initial one
+                   composed with every rolling rotation, so that
+                   ``positions == com + R(q) scale offsets``
+    contacts       (P,) int8 number of contacts at rest
+    state          (P,) int8 RESTING_THREE_CONTACTS, RESTING_ON_FLOOR, HANGING_ONE,
+                   HANGING_TWO; EVENT_LIMIT is the condition of particle ``stopped_at``,
+                   which is not included (the arrays hold the particles before it)
+    event_counts   (P, len(EVENT_KINDS)) int64 events per particle and kind
+    stopped_at     index of the particle that exceeded ``max_events_per_particle``, or -1
+    """
+
+    positions: np.ndarray
+    radii: np.ndarray
+    particle: np.ndarray
+    center_of_mass: np.ndarray
+    rotation: np.ndarray
+    contacts: np.ndarray
+    state: np.ndarray
+    event_counts: np.ndarray
+    stopped_at: int
+
+
+def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+            particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
+            trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000):
+    """Deposit particles one after the other by steepest descent; see the module docs.
+
+    Parameters
+    ----------
+    shape_offsets : (k, 3) float
+        Sphere centres of all shapes relative to each shape's centre of mass.
+    shape_radii : (k,) float
+        Sphere radii (> 0).
+    shape_start : (S + 1,) int
+        Shape ``s`` owns spheres ``shape_start[s]:shape_start[s + 1]`` (non-empty).
+    particle_shape : (P,) int
+        Shape of each particle, in deposition order.
+    particle_scale : (P,) float
+        Scale factor of offsets and radii (> 0).
+    particle_rotation : (P, 4) float
+        Initial orientation, unit quaternion (w, x, y, z) (normalised here).
+    particle_drop_xy : (P, 2) float
+        Horizontal position of the centre of mass at the drop.
+    box_lower_xy, box_upper_xy : (2,) float
+        Lateral box (ignored by LATERAL_NONE).  A periodic box must be wider than twice the
+        largest particle extent (distance from the centre of mass to the farthest sphere
+        surface) and than four sphere radii (contact distances below half the box).
+    lateral : int
+        LATERAL_PERIODIC, LATERAL_WALLS or LATERAL_NONE.
+    floor : int
+        FLOOR_STOP or FLOOR_ROLL.
+    trial_angle : float
+        Trial angle of frustrated situations (4.1), radians, >= 0 (0 disables the test).
+    cycle_n, cycle_eps :
+        Parameters ``(n, epsilon)`` of the cycling criterion (34); ``cycle_n = 0`` disables it.
+    max_events_per_particle : int
+        The run stops at the first particle that needs more events (``stopped_at``).
+    """
+    return deposit_with_diagnostics(
+        shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+        particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
+        trial_angle, cycle_n, cycle_eps, max_events_per_particle)[0]
+
+
+def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_shape,
+                             particle_scale, particle_rotation, particle_drop_xy, box_lower_xy,
+                             box_upper_xy, lateral, floor, trial_angle=1e-2, cycle_n=4,
+                             cycle_eps=1e-3, max_events_per_particle=100_000, check_overlaps=False,
+                             trace_particle=-1, trace_steps=0):
+    """:func:`deposit` plus a dict of diagnostics, for tests and benchmarks.
+
+    With ``check_overlaps`` the kernel measures, after every move, the largest overlap of
+    the moving particle with the sediment, the floor and the walls
+    (``diagnostics["max_overlap"]``, in units of length).  ``diagnostics["steps"]`` counts
+    decide-and-move steps of all particles, ``diagnostics["chunk_steps"]`` the ends of
+    angular search chunks among them; ``diagnostics["length_scale"]`` is the mean radius.
+    ``trace_particle`` / ``trace_steps`` record the first steps of one particle in
+    ``diagnostics["trace"]`` (see :func:`engine.run_deposition`).
+    """
+    from parsim.core.sdbd import engine, grid
+
+    offsets = np.ascontiguousarray(shape_offsets, dtype=np.float64)
+    radii = np.ascontiguousarray(shape_radii, dtype=np.float64)
+    start = np.ascontiguousarray(shape_start, dtype=np.int64)
+    pshape = np.ascontiguousarray(particle_shape, dtype=np.int64)
+    pscale = np.ascontiguousarray(particle_scale, dtype=np.float64)
+    prot = np.array(particle_rotation, dtype=np.float64, copy=True)
+    pxy = np.ascontiguousarray(particle_drop_xy, dtype=np.float64)
+    lo = np.asarray(box_lower_xy, dtype=np.float64)
+    hi = np.asarray(box_upper_xy, dtype=np.float64)
+
+    if offsets.ndim != 2 or offsets.shape[1] != 3:
+        raise ValueError(f"shape_offsets must have shape (k, 3), got {offsets.shape}")
+    if radii.shape != (offsets.shape[0],):
+        raise ValueError(f"shape_radii must have shape ({offsets.shape[0]},), got {radii.shape}")
+    if not (np.all(np.isfinite(offsets)) and np.all(np.isfinite(radii)) and np.all(radii > 0)):
+        raise ValueError("shape_offsets must be finite and shape_radii finite and > 0")
+    if start.ndim != 1 or start.shape[0] < 2 or start[0] != 0 or start[-1] != offsets.shape[0] \
+            or np.any(np.diff(start) <= 0):
+        raise ValueError("shape_start must increase strictly from 0 to len(shape_radii)")
+    n_shapes = start.shape[0] - 1
+    P = pshape.shape[0]
+    if pshape.ndim != 1 or np.any(pshape < 0) or np.any(pshape >= n_shapes):
+        raise ValueError(f"particle_shape must be a 1-d array of shape indices in [0, {n_shapes})")
+    if pscale.shape != (P,) or not np.all(np.isfinite(pscale)) or np.any(pscale <= 0):
+        raise ValueError(f"particle_scale must have shape ({P},) with finite values > 0")
+    if prot.shape != (P, 4) or not np.all(np.isfinite(prot)):
+        raise ValueError(f"particle_rotation must have shape ({P}, 4) with finite values")
+    norms = np.linalg.norm(prot, axis=1)
+    if np.any(norms < 1e-12):
+        raise ValueError("particle_rotation must hold non-zero quaternions")
+    prot = np.ascontiguousarray(prot / norms[:, None])
+    if pxy.shape != (P, 2) or not np.all(np.isfinite(pxy)):
+        raise ValueError(f"particle_drop_xy must have shape ({P}, 2) with finite values")
+    if lateral not in (LATERAL_PERIODIC, LATERAL_WALLS, LATERAL_NONE):
+        raise ValueError(f"lateral must be LATERAL_PERIODIC (0), LATERAL_WALLS (1) or LATERAL_NONE (2), got {lateral}")
+    if floor not in (FLOOR_STOP, FLOOR_ROLL):
+        raise ValueError(f"floor must be FLOOR_STOP (0) or FLOOR_ROLL (1), got {floor}")
+    if not (np.isfinite(trial_angle) and 0.0 <= trial_angle < np.pi):
+        raise ValueError(f"trial_angle must be in [0, pi), got {trial_angle}")
+    if int(cycle_n) != cycle_n or not 0 <= cycle_n <= 28:
+        raise ValueError(f"cycle_n must be an integer in [0, 28], got {cycle_n}")
+    if not (np.isfinite(cycle_eps) and cycle_eps > 0):
+        raise ValueError(f"cycle_eps must be > 0, got {cycle_eps}")
+    if int(max_events_per_particle) != max_events_per_particle or max_events_per_particle < 1:
+        raise ValueError(f"max_events_per_particle must be an integer >= 1, got {max_events_per_particle}")
+
+    counts = np.diff(start)
+    n_total = int(np.sum(counts[pshape])) if P else 0
+    # scales: extent of each shape about its centre of mass, largest radius
+    shape_extent = np.array([np.max(np.linalg.norm(offsets[start[s]:start[s + 1]], axis=1)
+                                    + radii[start[s]:start[s + 1]]) for s in range(n_shapes)])
+    shape_rmax = np.array([np.max(radii[start[s]:start[s + 1]]) for s in range(n_shapes)])
+    if P:
+        ell = float(np.sum(pscale * np.array([np.sum(radii[start[s]:start[s + 1]]) for s in range(n_shapes)])[pshape])
+                    / n_total)
+        r_max = float(np.max(pscale * shape_rmax[pshape]))
+        ext_max = float(np.max(pscale * shape_extent[pshape]))
+    else:
+        ell = 1.0
+        r_max = 1.0
+        ext_max = 1.0
+
+    if lateral != LATERAL_NONE:
+        if lo.shape != (2,) or hi.shape != (2,) or not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)):
+            raise ValueError("box_lower_xy and box_upper_xy must be finite pairs (x, y)")
+        if np.any(hi <= lo):
+            raise ValueError("box_upper_xy must exceed box_lower_xy in x and y")
+    if lateral == LATERAL_PERIODIC:
+        side = np.min(hi - lo)
+        need = max(2.0 * ext_max, 4.0 * r_max)
+        if side <= need:
+            raise ValueError(
+                f"periodic box side {side:g} must exceed twice the largest particle extent "
+                f"(2 x {ext_max:g}) and four times the largest sphere radius (4 x {r_max:g}), "
+                f"i.e. {need:g}, so that minimum images are unambiguous")
+    if lateral == LATERAL_WALLS and P:
+        # the caller guarantees that each particle starts inside; check it
+        w, x, y, z = prot.T
+        R = np.empty((P, 3, 3))
+        R[:, 0, 0] = 1 - 2 * (y * y + z * z)
+        R[:, 0, 1] = 2 * (x * y - w * z)
+        R[:, 0, 2] = 2 * (x * z + w * y)
+        R[:, 1, 0] = 2 * (x * y + w * z)
+        R[:, 1, 1] = 1 - 2 * (x * x + z * z)
+        R[:, 1, 2] = 2 * (y * z - w * x)
+        for p in range(P):
+            s = pshape[p]
+            o = pscale[p] * offsets[start[s]:start[s + 1]]
+            r = pscale[p] * radii[start[s]:start[s + 1]]
+            xy = pxy[p] + o @ R[p, :2, :].T
+            tol = 1e-9 * ell
+            if np.any(xy - r[:, None] < lo - tol) or np.any(xy + r[:, None] > hi + tol):
+                raise ValueError(f"particle {p}: dropped at {tuple(pxy[p])}, it does not fit inside the walls")
+        if np.any(hi - lo < 2.0 * r_max):
+            raise ValueError("walled box narrower than the largest sphere")
+    if lateral == LATERAL_NONE:
+        lo = np.zeros(2)
+        hi = np.zeros(2)
+
+    cell = 2.0 * r_max
+    g = grid.grid_new(lateral, lo, hi, cell, n_total)
+    out_pos = np.zeros((n_total, 3))
+    out_rad = np.zeros(n_total)
+    out_particle = np.zeros(n_total, dtype=np.int64)
+    out_com = np.zeros((P, 3))
+    out_rot = np.zeros((P, 4))
+    out_contacts = np.zeros(P, dtype=np.int64)
+    out_state = np.zeros(P, dtype=np.int64)
+    out_events = np.zeros((P, N_EVENT_KINDS), dtype=np.int64)
+    diag = np.zeros(3)
+    trace = np.full((max(int(trace_steps), 1), 16), np.nan)
+    stopped_at, n_written = engine.run_deposition(
+        offsets, radii, start, pshape, pscale, prot, pxy, *g, int(floor), float(trial_angle),
+        int(cycle_n), float(cycle_eps), int(max_events_per_particle), ell, r_max,
+        bool(check_overlaps), int(trace_particle), trace, out_pos, out_rad, out_particle, out_com, out_rot, out_contacts,
+        out_state, out_events, diag)
+    n_done = P if stopped_at < 0 else int(stopped_at)
+    return DepositionResult(
+        positions=out_pos[:n_written],
+        radii=out_rad[:n_written],
+        particle=out_particle[:n_written],
+        center_of_mass=out_com[:n_done],
+        rotation=out_rot[:n_done],
+        contacts=out_contacts[:n_done].astype(np.int8),
+        state=out_state[:n_done].astype(np.int8),
+        event_counts=out_events[:n_done],
+        stopped_at=int(stopped_at),
+    ), {"max_overlap": float(diag[0]), "steps": int(diag[1]), "chunk_steps": int(diag[2]),
+        "length_scale": ell, "trace": trace}
+

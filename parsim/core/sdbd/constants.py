@@ -1,0 +1,158 @@
+"""Constants of the SDBD engine: boundary modes, particle states, event kinds, tolerances.
+
+Every tolerance is a named constant with its scale.  Lengths are measured in units of the
+*length scale* ``ell`` of a run, the mean radius of all spheres that will be deposited
+(``sum_p scale_p * sum radii of shape_p / number of spheres``); angles are in radians.
+"""
+
+import numpy as np
+
+# --------------------------------------------------------------------------- boundaries
+#: Periodic in x and y over ``[box_lower_xy, box_upper_xy)`` (minimum-image distances).
+LATERAL_PERIODIC = 0
+#: Rigid vertical walls at the four box faces.
+LATERAL_WALLS = 1
+#: No lateral boundary: a heap on an unbounded floor.
+LATERAL_NONE = 2
+
+#: The paper's floor: a particle touching the plane ``z = 0`` is immobilised at once.
+FLOOR_STOP = 0
+#: The floor contact is a pivot like any other (about the touching sphere's own centre).
+FLOOR_ROLL = 1
+
+# --------------------------------------------------------------------------- states
+#: At rest: no rotation about one contact or about a pair of contacts descends
+#: (normally three contacts; a particle that rests with fewer contacts of which one is
+#: the floor, under FLOOR_ROLL, is reported RESTING_ON_FLOOR).
+RESTING_THREE_CONTACTS = 0
+#: Stopped on the floor: FLOOR_STOP immobilised it at its first floor contact, or, under
+#: FLOOR_ROLL, it rests with fewer than three contacts one of which is the floor.
+RESTING_ON_FLOOR = 1
+#: Hangs on one contact: the centre of mass is straight below the pivot.  (Also a
+#: particle held at rest by one wall contact and nothing else that lets it descend.)
+HANGING_ONE = 2
+#: Hangs on two contacts: the centre of mass is straight below the axis of the pivots.
+#: With walls this also covers a particle held by a wall and one other contact: the wall
+#: pivot is the touching sphere's own centre (no sliding), so e.g. a single sphere
+#: touching a wall and a sediment sphere has its centre on the axis and cannot roll.
+HANGING_TWO = 3
+#: The particle needed more than ``max_events_per_particle`` events; the run stopped there.
+EVENT_LIMIT = 4
+
+STATE_NAMES = ("resting_three_contacts", "resting_on_floor", "hanging_one", "hanging_two",
+               "event_limit")
+
+# --------------------------------------------------------------------------- event kinds
+#: Column names of ``DepositionResult.event_counts``.
+EVENT_KINDS = (
+    "fall_contact",             # 3.1: a falling particle touches a sediment sphere
+    "second_contact",           # 3.2.2 (a): rolling on one contact, a new sphere contact
+    "loss_of_contact",          # 3.2.3 (b): rolling on one contact, it opens (fall)
+    "hanging_one",              # 3.2.4 (c): centre of mass below the single pivot
+    "wall_contact",             # 3.2.5 (d) / 3.3.6 (e): a lateral wall is touched
+    "third_contact",            # 3.3.2 (a): rolling on two contacts, a new sphere contact
+    "loss_of_one_contact",      # 3.3.3 (b): rolling on two, one of them opens (eq. 25-30)
+    "loss_of_two_contacts",     # 3.3.4 (c): rolling on two, both open (fall)
+    "hanging_two",              # 3.3.5 (d): centre of mass below the axis of two pivots
+    "floor_contact",            # 3.1 / 3.2.5 / 3.3.6: the floor z = 0 is touched
+    "frustrated_trial_rotation",  # 4.1: a trial rotation by the trial angle was executed
+    "cycling_interruption",     # 4.2: criterion (34) met, cycling contacts declared closed
+    "simultaneous",             # 4.3: extra events executed at the same height / angle
+)
+K_FALL_CONTACT = 0
+K_SECOND_CONTACT = 1
+K_LOSS_OF_CONTACT = 2
+K_HANGING_ONE = 3
+K_WALL_CONTACT = 4
+K_THIRD_CONTACT = 5
+K_LOSS_OF_ONE = 6
+K_LOSS_OF_TWO = 7
+K_HANGING_TWO = 8
+K_FLOOR_CONTACT = 9
+K_FRUSTRATED = 10
+K_CYCLING = 11
+K_SIMULTANEOUS = 12
+N_EVENT_KINDS = len(EVENT_KINDS)
+
+# --------------------------------------------------------------------------- internal codes
+# Obstacle kinds of a contact.
+OB_SPHERE = 0
+OB_FLOOR = 1
+OB_WALL_XLO = 2
+OB_WALL_XHI = 3
+OB_WALL_YLO = 4
+OB_WALL_YHI = 5
+
+# Motions chosen by the steepest-descent decision.
+MOTION_FALL = 0
+MOTION_SINGLE = 1
+MOTION_PAIR = 2
+MOTION_REST = 3
+
+# Kinds of potential events of a rotation.
+EV_NONE = -1
+EV_CHUNK = 0        # end of an angular chunk (no physical event; bookkeeping only)
+EV_CONTACT = 1      # a new contact (sphere, floor or wall)
+EV_LOSS = 2         # the pivot sphere reaches the height of its sediment sphere
+EV_RELEASE = 3      # eq. 25-30: rolling on one of the two pivots becomes possible
+EV_HANG = 4         # the centre of mass reaches the lowest point of its circle
+EV_TRIAL = 5        # 4.1 trial rotation by the trial angle
+EV_VIRTUAL = 6      # eq. 31: virtual small rotation
+
+#: Most contacts a particle can hold at once (three at rest; simultaneous events and
+#: cycling interruptions can add a few more for an instant).
+MAX_CONTACTS = 16
+#: Most events that can be executed together as simultaneous (4.3) in one step.
+MAX_TIES = 64
+
+# --------------------------------------------------------------------------- tolerances
+#: Largest overlap, in units of ell, that a move may leave between a sphere of the moving
+#: particle and the sediment (or the floor, a wall); a larger one is a bug.
+OVERLAP_LIMIT = 1e-9
+#: A gap below TOUCH_TOL * ell counts as touching (round-off of positions up to ~1e3 ell
+#: from the origin is ~1e-13 ell).
+TOUCH_TOL = 1e-10
+#: First-order rate d(gap)/d(phi) (length per radian) below RATE_TOL * ell in magnitude
+#: is "tangent": the second-order probe decides whether a contact opens.
+RATE_TOL = 1e-10
+#: Angle of the second-order probe (rad): a tangent contact opens if its gap after a
+#: rotation by PROBE_ANGLE has not dropped by more than PROBE_TOL * ell (the quadratic
+#: term is ~ell * PROBE_ANGLE^2 / 2 = 5e-9 ell, the round-off ~1e-13 ell).
+PROBE_ANGLE = 1e-4
+PROBE_TOL = 1e-11
+#: Falling is allowed when every contact normal has a z component <= NZ_TOL (the moving
+#: sphere is below or level with its sediment sphere); dimensionless.
+NZ_TOL = 1e-10
+#: A motion whose centre of mass descends with slope -dz/ds <= DESCENT_TOL does not
+#: descend (hanging / rest); dimensionless.
+DESCENT_TOL = 1e-10
+#: Two candidate motions whose slopes differ by less than STEEP_TOL are equally steep;
+#: the first in the fixed order (singles, then pairs, by contact index) is taken.
+STEEP_TOL = 1e-12
+#: Events within SIMULTANEOUS_TOL * ell of fall height, or whose arcs differ by less than
+#: that length, are simultaneous (4.3) and are executed together.
+SIMULTANEOUS_TOL = 1e-11
+#: Roots of the contact equations within ANGLE_EPS (rad) of 0 or 2 pi belong to the
+#: current position (round-off), not to a future event.
+ANGLE_EPS = 1e-10
+#: Eq. 31: the virtual small rotation that decides whether a contact whose release
+#: condition (25) holds with zero first derivative really opens is the trial angle of 4.1
+#: (the paper refers to 4.1 for it); VIRTUAL_ANGLE (rad) is used when the trial test is
+#: disabled (trial_angle = 0).  A much smaller angle makes the particle creep along the
+#: contact in steps of that angle (release, virtual rotation, roll, re-contact, ...).
+VIRTUAL_ANGLE = 1e-6
+#: 4.2: when cycling is detected, every obstacle within CYCLE_CLOSE_GAP * ell of the
+#: particle is declared a closed contact (the paper reports clearances ~1e-8 of the
+#: radius); also the descent over the last 24 steps below which the particle is
+#: considered frozen (creeping), and the clearance below which obstacles count as
+#: contacts when the decision finds rest.
+CYCLE_CLOSE_GAP = 1e-7
+#: Rotations are searched in chunks in which no sphere moves more than CHUNK_CELLS grid
+#: cells, so that each query covers few cells (a chunk end is not a physical event).
+CHUNK_CELLS = 1.5
+#: Margin (units of ell) by which a particle starts above the top of the sediment.
+DROP_MARGIN = 1e-2
+#: Lengths below TINY * ell are zero (a sphere on a rotation axis, a degenerate axis).
+TINY = 1e-14
+
+INT = np.int64

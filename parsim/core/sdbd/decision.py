@@ -1,0 +1,252 @@
+"""Steepest-descent decision: which motion a particle with given contacts follows.
+
+Contacts are given by their geometry arrays (``n_c`` rows used):
+
+``ca``   centre of the moving sphere of the contact
+``cP``   pivot: the sediment sphere's centre (minimum image), or for the floor and a wall
+         the moving sphere's own centre (the plane holds it; see the engine docs)
+``cN``   unit contact normal pointing from the obstacle to the moving sphere
+``ckind`` obstacle kind (``OB_SPHERE``, ``OB_FLOOR``, ``OB_WALL_*``)
+``cD``   sum of radii (sphere contacts)
+``cc0``  plane level: the moving sphere's centre must satisfy ``N . a >= c0``
+
+The candidate motions are those of the paper (Fig. 2, 3.2, 3.3):
+
+* fall (3.1): allowed when every contact normal has ``N_z <= NZ_TOL`` (each moving sphere
+  is below or level with its obstacle, 3.2.3 / 3.3.4); slope 1, the steepest;
+* rotation on one contact ``k`` (3.2): axis ``n = e_z x (r_cm - P_k) / |...|`` (eq. 6),
+  slope ``-dz_cm/ds = |d_xy| / |d|`` with ``d = r_cm - P_k``;
+* rotation on two contacts ``k, m`` (3.3): axis along ``P_m - P_k`` (eq. 24), the sense
+  that lowers the centre of mass, slope ``|(u x d)_z| / |u x d|``.
+
+A candidate is *valid* when every other contact opens or stays closed under it: the rate
+``N_l . (omega x (a_l - P))`` of its gap is positive, or, when it is tangent within
+``RATE_TOL``, the gap has not dropped after a probe rotation by ``PROBE_ANGLE`` (the
+second-order test of eq. 31).  The steepest valid candidate is chosen, as the paper
+prescribes for three contacts (3.3.2); a rotation on one contact is always at least as
+steep as a rotation on two that includes it (its centre-of-mass path is the steepest on
+the sphere ``|r_cm - P_k| = const``), which is the paper's rule that a newly established
+single contact is preferred (3.2.2).  "Steepest" is measured by the slope of the path of
+the centre of mass, ``-dz/ds``.
+
+No valid descending candidate means rest: three contacts, or hanging on one / two.  A
+centre of mass exactly above a pivot (or above the axis of two) is an unstable
+equilibrium; the decision then tips it about a fixed horizontal axis (x, then y) if that
+is valid, so that measure-zero symmetric drops do not balance forever.
+"""
+
+import math
+
+from parsim.core.jit import jit
+from parsim.core.sdbd.constants import (
+    DESCENT_TOL,
+    MOTION_FALL,
+    MOTION_PAIR,
+    MOTION_REST,
+    MOTION_SINGLE,
+    NZ_TOL,
+    OB_SPHERE,
+    PROBE_ANGLE,
+    PROBE_TOL,
+    RATE_TOL,
+    STEEP_TOL,
+    TINY,
+)
+
+__all__ = ["contact_opens", "decide"]
+
+#: Two pivots closer than this (units of ell) are one point: no axis through them.
+_SAME_PIVOT = 1e-9
+
+
+@jit
+def contact_opens(l, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, cc0, ell):
+    """Does contact ``l`` open (or stay closed) under the rotation ``omega = w`` about ``p``?"""
+    r0 = ca[l, 0] - p0
+    r1 = ca[l, 1] - p1
+    r2 = ca[l, 2] - p2
+    v0 = w1 * r2 - w2 * r1
+    v1 = w2 * r0 - w0 * r2
+    v2 = w0 * r1 - w1 * r0
+    g = cN[l, 0] * v0 + cN[l, 1] * v1 + cN[l, 2] * v2
+    if g > RATE_TOL * ell:
+        return True
+    if g < -RATE_TOL * ell:
+        return False
+    # tangent: second-order probe, eq. 15 by PROBE_ANGLE
+    c = math.cos(PROBE_ANGLE)
+    s = math.sin(PROBE_ANGLE)
+    k = (1.0 - c) * (w0 * r0 + w1 * r1 + w2 * r2)
+    x0 = p0 + k * w0 + c * r0 + s * v0
+    x1 = p1 + k * w1 + c * r1 + s * v1
+    x2 = p2 + k * w2 + c * r2 + s * v2
+    if ckind[l] == OB_SPHERE:
+        g0 = math.sqrt((ca[l, 0] - cP[l, 0]) ** 2 + (ca[l, 1] - cP[l, 1]) ** 2
+                       + (ca[l, 2] - cP[l, 2]) ** 2)
+        g1 = math.sqrt((x0 - cP[l, 0]) ** 2 + (x1 - cP[l, 1]) ** 2 + (x2 - cP[l, 2]) ** 2)
+    else:
+        g0 = cN[l, 0] * ca[l, 0] + cN[l, 1] * ca[l, 1] + cN[l, 2] * ca[l, 2]
+        g1 = cN[l, 0] * x0 + cN[l, 1] * x1 + cN[l, 2] * x2
+    return g1 - g0 >= -PROBE_TOL * ell
+
+
+@jit
+def _all_open(n_c, skip1, skip2, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, cc0, ell):
+    for l in range(n_c):
+        if l == skip1 or l == skip2:
+            continue
+        if not contact_opens(l, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, cc0, ell):
+            return False
+    return True
+
+
+@jit
+def decide(com, n_c, ca, cP, cN, ckind, cD, cc0, ell, out):
+    """Choose the motion; returns ``(motion, k, m, slope)``.
+
+    For a rotation, ``out[0:3]`` is the unit axis (rotation sense: positive angle) and
+    ``out[3:6]`` a point of it (the pivot ``P_k``); ``k`` (and ``m`` for a pair) are the
+    pivot contacts, ``-1`` otherwise.
+    """
+    if n_c == 0:
+        return MOTION_FALL, -1, -1, 1.0
+    fall = True
+    for l in range(n_c):
+        if cN[l, 2] > NZ_TOL:
+            fall = False
+            break
+    if fall:
+        return MOTION_FALL, -1, -1, 1.0
+    best = -1.0
+    motion = MOTION_REST
+    bk = -1
+    bm = -1
+    # rotation on one contact
+    for k in range(n_c):
+        d0 = com[0] - cP[k, 0]
+        d1 = com[1] - cP[k, 1]
+        d2 = com[2] - cP[k, 2]
+        dn = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        dh = math.sqrt(d0 * d0 + d1 * d1)
+        if dn <= TINY * ell or dh <= DESCENT_TOL * dn:
+            continue
+        slope = dh / dn
+        if slope <= best + STEEP_TOL:
+            continue
+        w0 = -d1 / dh
+        w1 = d0 / dh
+        if _all_open(n_c, k, -1, cP[k, 0], cP[k, 1], cP[k, 2], w0, w1, 0.0,
+                     ca, cP, cN, ckind, cD, cc0, ell):
+            best = slope
+            motion = MOTION_SINGLE
+            bk = k
+            bm = -1
+            out[0] = w0
+            out[1] = w1
+            out[2] = 0.0
+    # rotation on two contacts
+    for k in range(n_c):
+        for m in range(k + 1, n_c):
+            u0 = cP[m, 0] - cP[k, 0]
+            u1 = cP[m, 1] - cP[k, 1]
+            u2 = cP[m, 2] - cP[k, 2]
+            L = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+            if L <= _SAME_PIVOT * ell:
+                continue
+            u0 /= L
+            u1 /= L
+            u2 /= L
+            d0 = com[0] - cP[k, 0]
+            d1 = com[1] - cP[k, 1]
+            d2 = com[2] - cP[k, 2]
+            x0 = u1 * d2 - u2 * d1
+            x1 = u2 * d0 - u0 * d2
+            x2 = u0 * d1 - u1 * d0
+            xn = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+            if xn <= TINY * ell or abs(x2) <= DESCENT_TOL * xn:
+                continue
+            slope = abs(x2) / xn
+            if slope <= best + STEEP_TOL:
+                continue
+            sg = -1.0 if x2 > 0.0 else 1.0
+            if _all_open(n_c, k, m, cP[k, 0], cP[k, 1], cP[k, 2], sg * u0, sg * u1, sg * u2,
+                         ca, cP, cN, ckind, cD, cc0, ell):
+                best = slope
+                motion = MOTION_PAIR
+                bk = k
+                bm = m
+                out[0] = sg * u0
+                out[1] = sg * u1
+                out[2] = sg * u2
+    if motion == MOTION_REST:
+        # unstable equilibria: centre of mass straight above a pivot
+        for k in range(n_c):
+            d0 = com[0] - cP[k, 0]
+            d1 = com[1] - cP[k, 1]
+            d2 = com[2] - cP[k, 2]
+            dn = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            dh = math.sqrt(d0 * d0 + d1 * d1)
+            if dn <= TINY * ell or dh > DESCENT_TOL * dn or d2 <= 0.0:
+                continue
+            for t in range(4):
+                w0 = 0.0
+                w1 = 0.0
+                if t == 0:
+                    w0 = 1.0
+                elif t == 1:
+                    w1 = 1.0
+                elif t == 2:
+                    w0 = -1.0
+                else:
+                    w1 = -1.0
+                if _all_open(n_c, k, -1, cP[k, 0], cP[k, 1], cP[k, 2], w0, w1, 0.0,
+                             ca, cP, cN, ckind, cD, cc0, ell):
+                    out[0] = w0
+                    out[1] = w1
+                    out[2] = 0.0
+                    for q in range(3):
+                        out[3 + q] = cP[k, q]
+                    return MOTION_SINGLE, k, -1, 0.0
+        # ... or straight above the axis of two pivots (top of its circle)
+        for k in range(n_c):
+            for m in range(k + 1, n_c):
+                u0 = cP[m, 0] - cP[k, 0]
+                u1 = cP[m, 1] - cP[k, 1]
+                u2 = cP[m, 2] - cP[k, 2]
+                L = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+                if L <= _SAME_PIVOT * ell:
+                    continue
+                u0 /= L
+                u1 /= L
+                u2 /= L
+                if 1.0 - abs(u2) <= DESCENT_TOL:
+                    continue  # vertical axis: no height change
+                d0 = com[0] - cP[k, 0]
+                d1 = com[1] - cP[k, 1]
+                d2 = com[2] - cP[k, 2]
+                h = d0 * u0 + d1 * u1 + d2 * u2
+                p0 = d0 - h * u0
+                p1 = d1 - h * u1
+                p2 = d2 - h * u2
+                pn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+                if pn <= TINY * ell:
+                    continue
+                x2 = u0 * p1 - u1 * p0  # (u x d)_z
+                # above: the offset from the axis points up (ez . p > 0) and is normal to
+                # the descent direction
+                if abs(x2) > DESCENT_TOL * pn or p2 <= 0.0:
+                    continue
+                for t in range(2):
+                    sg = 1.0 if t == 0 else -1.0
+                    if _all_open(n_c, k, m, cP[k, 0], cP[k, 1], cP[k, 2], sg * u0, sg * u1,
+                                 sg * u2, ca, cP, cN, ckind, cD, cc0, ell):
+                        out[0] = sg * u0
+                        out[1] = sg * u1
+                        out[2] = sg * u2
+                        for q in range(3):
+                            out[3 + q] = cP[k, q]
+                        return MOTION_PAIR, k, m, 0.0
+        return MOTION_REST, -1, -1, 0.0
+    for q in range(3):
+        out[3 + q] = cP[bk, q]
+    return motion, bk, bm, best

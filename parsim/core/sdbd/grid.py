@@ -1,0 +1,260 @@
+"""Sediment neighbour grid whose cost does not grow with the height of the pile.
+
+Space is cut into columns of side ``ax x ay`` (``>=`` the largest sphere diameter) and
+every column into layers of height ``az`` (the same bound) starting at the floor
+``z = 0``.  A cell ``(column, layer)`` keeps a singly linked list of the sediment spheres
+whose (wrapped) centre lies in it: ``head[iz, col]`` is the newest sphere, ``nxt[j]`` the
+next one, ``-1`` ends a list.  Spheres are only ever added.  ``head`` is layer-major, so
+the cells of the surface of the pile, where all queries happen, share few memory pages.
+
+* ``col_top[col]`` is the highest non-empty layer of a column (the *height map*): a query
+  never visits layers above it, and a falling particle starts its downward scan of a
+  column there, whatever the height of the particle or of the pile.  A query therefore
+  costs O(cells within reach of the moving spheres), independent of the pile height.
+* Layers are added on top as the pile grows (``head`` is reallocated with twice as many
+  layers when a sphere lands above the last one; amortised O(1) per sphere).
+* Columns: periodic boxes wrap the column index (``ncx x ncy`` columns, cell side
+  ``L / ncx``); walled boxes clip it; the unbounded floor (LATERAL_NONE) hashes the
+  integer pair ``(ix, iy)`` into an open-addressing table and creates columns on demand,
+  so nothing assumes bounds.
+
+State is kept in plain arrays so that numba kernels can own and grow it:
+
+``geom``     float64 ``[lo_x, lo_y, L_x, L_y, ax, ay, az]``
+``igeom``    int64 ``[mode, ncx, ncy]`` (mode = lateral boundary code)
+``head``     int64 ``(n_layer_capacity, n_col_capacity)``
+``col_top``  int64 ``(n_col_capacity,)``
+``nxt``      int64 ``(n_spheres_capacity,)``
+``hkeys``    int64 ``(hash_capacity, 2)``, ``hval`` int64 ``(hash_capacity,)`` (LATERAL_NONE)
+``counts``   int64 ``[n_columns_used]``
+"""
+
+import math
+
+import numpy as np
+
+from parsim.core.jit import jit
+from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, LATERAL_WALLS
+
+__all__ = [
+    "grid_new",
+    "grid_insert",
+    "grid_collect",
+    "column_lookup",
+    "wrap_position",
+    "min_image",
+]
+
+_HASH_A = 0x9E3779B97F4A7C15 >> 1
+_HASH_B = 0xC2B2AE3D27D4EB4F >> 1
+
+
+def grid_new(lateral, box_lower_xy, box_upper_xy, cell, n_spheres):
+    """Empty grid for spheres of diameter ``<= cell``; returns the tuple of state arrays."""
+    lo = np.asarray(box_lower_xy, dtype=np.float64)
+    hi = np.asarray(box_upper_xy, dtype=np.float64)
+    if lateral == LATERAL_NONE:
+        ncx = 0
+        ncy = 0
+        L = np.array([0.0, 0.0])
+        ax = ay = cell
+        ncol = 64
+        hcap = 128
+    else:
+        L = hi - lo
+        ncx = max(1, int(math.floor(L[0] / cell)))
+        ncy = max(1, int(math.floor(L[1] / cell)))
+        while ncx > 1 and L[0] / ncx < cell:
+            ncx -= 1
+        while ncy > 1 and L[1] / ncy < cell:
+            ncy -= 1
+        ax = L[0] / ncx
+        ay = L[1] / ncy
+        ncol = ncx * ncy
+        hcap = 2
+    geom = np.array([lo[0], lo[1], L[0], L[1], ax, ay, cell], dtype=np.float64)
+    igeom = np.array([lateral, ncx, ncy], dtype=np.int64)
+    head = np.full((8, ncol), -1, dtype=np.int64)
+    col_top = np.full(ncol, -1, dtype=np.int64)
+    nxt = np.full(max(1, n_spheres), -1, dtype=np.int64)
+    hkeys = np.zeros((hcap, 2), dtype=np.int64)
+    hval = np.full(hcap, -1, dtype=np.int64)
+    counts = np.zeros(1, dtype=np.int64)
+    return geom, igeom, head, col_top, nxt, hkeys, hval, counts
+
+
+@jit
+def _hash(ix, iy, mask):
+    h = (ix * _HASH_A) ^ (iy * _HASH_B)
+    h ^= h >> 29
+    return h & mask
+
+
+@jit
+def column_lookup(igeom, hkeys, hval, ix, iy):
+    """Column id of the integer column ``(ix, iy)`` or -1 (walled box outside, or unused)."""
+    mode = igeom[0]
+    if mode == LATERAL_PERIODIC:
+        ncx = igeom[1]
+        ncy = igeom[2]
+        return (ix % ncx) + ncx * (iy % ncy)
+    if mode == LATERAL_WALLS:
+        if ix < 0 or iy < 0 or ix >= igeom[1] or iy >= igeom[2]:
+            return -1
+        return ix + igeom[1] * iy
+    mask = hval.shape[0] - 1
+    k = _hash(ix, iy, mask)
+    while True:
+        v = hval[k]
+        if v < 0:
+            return -1
+        if hkeys[k, 0] == ix and hkeys[k, 1] == iy:
+            return v
+        k = (k + 1) & mask
+
+
+@jit
+def wrap_position(geom, igeom, x, y):
+    """Position folded into the periodic box (unchanged for other boundaries)."""
+    if igeom[0] == LATERAL_PERIODIC:
+        x = geom[0] + (x - geom[0]) % geom[2]
+        y = geom[1] + (y - geom[1]) % geom[3]
+        # round-off of % can give exactly L
+        if x >= geom[0] + geom[2]:
+            x -= geom[2]
+        if y >= geom[1] + geom[3]:
+            y -= geom[3]
+    return x, y
+
+
+@jit
+def min_image(geom, igeom, dx, dy):
+    """Minimum-image lateral difference (unchanged for other boundaries)."""
+    if igeom[0] == LATERAL_PERIODIC:
+        dx -= geom[2] * math.floor(dx / geom[2] + 0.5)
+        dy -= geom[3] * math.floor(dy / geom[3] + 0.5)
+    return dx, dy
+
+
+@jit
+def _column_index(geom, x, y):
+    ix = int(math.floor((x - geom[0]) / geom[4]))
+    iy = int(math.floor((y - geom[1]) / geom[5]))
+    return ix, iy
+
+
+@jit
+def _new_column(igeom, head, col_top, hkeys, hval, counts, ix, iy):
+    """LATERAL_NONE: create column ``(ix, iy)``; returns (col, head, col_top, hkeys, hval)."""
+    n = counts[0]
+    if 2 * (n + 1) > hval.shape[0]:
+        cap = 2 * hval.shape[0]
+        nk = np.zeros((cap, 2), dtype=np.int64)
+        nv = np.full(cap, -1, dtype=np.int64)
+        mask = cap - 1
+        for k in range(hval.shape[0]):
+            v = hval[k]
+            if v >= 0:
+                h = _hash(hkeys[k, 0], hkeys[k, 1], mask)
+                while nv[h] >= 0:
+                    h = (h + 1) & mask
+                nk[h, 0] = hkeys[k, 0]
+                nk[h, 1] = hkeys[k, 1]
+                nv[h] = v
+        hkeys = nk
+        hval = nv
+    if n >= head.shape[1]:
+        nh = np.full((head.shape[0], 2 * head.shape[1]), -1, dtype=np.int64)
+        nh[:, : head.shape[1]] = head
+        head = nh
+        nt = np.full(2 * col_top.shape[0], -1, dtype=np.int64)
+        nt[: col_top.shape[0]] = col_top
+        col_top = nt
+    mask = hval.shape[0] - 1
+    h = _hash(ix, iy, mask)
+    while hval[h] >= 0:
+        h = (h + 1) & mask
+    hkeys[h, 0] = ix
+    hkeys[h, 1] = iy
+    hval[h] = n
+    counts[0] = n + 1
+    return n, head, col_top, hkeys, hval
+
+
+@jit
+def grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, x, y, z):
+    """Add sphere ``j`` with (wrapped) centre ``x, y, z``; returns the possibly grown arrays
+    ``(head, col_top, hkeys, hval)``."""
+    ix, iy = _column_index(geom, x, y)
+    mode = igeom[0]
+    if mode == LATERAL_PERIODIC:
+        ix = min(max(ix, 0), igeom[1] - 1)
+        iy = min(max(iy, 0), igeom[2] - 1)
+    elif mode == LATERAL_WALLS:
+        ix = min(max(ix, 0), igeom[1] - 1)
+        iy = min(max(iy, 0), igeom[2] - 1)
+    col = column_lookup(igeom, hkeys, hval, ix, iy)
+    if col < 0:
+        col, head, col_top, hkeys, hval = _new_column(igeom, head, col_top, hkeys, hval, counts, ix, iy)
+    iz = int(math.floor(z / geom[6]))
+    if iz < 0:
+        iz = 0
+    if iz >= head.shape[0]:
+        nl = max(2 * head.shape[0], iz + 1)
+        nh = np.full((nl, head.shape[1]), -1, dtype=np.int64)
+        nh[: head.shape[0], :] = head
+        head = nh
+    nxt[j] = head[iz, col]
+    head[iz, col] = j
+    if iz > col_top[col]:
+        col_top[col] = iz
+    return head, col_top, hkeys, hval
+
+
+@jit
+def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z0, z1, buf):
+    """Indices of the spheres whose cells meet the box ``[x0,x1] x [y0,y1] x [z0,z1]``.
+
+    Writes them into ``buf`` and returns their number, or ``-1`` if ``buf`` is too small
+    (the caller grows it and asks again).  Each sphere is listed once even when a periodic
+    query box is wider than the box itself; the caller applies minimum images.
+    """
+    mode = igeom[0]
+    ix0, iy0 = _column_index(geom, x0, y0)
+    ix1, iy1 = _column_index(geom, x1, y1)
+    if mode == LATERAL_PERIODIC:
+        if ix1 - ix0 + 1 >= igeom[1]:
+            ix0 = 0
+            ix1 = igeom[1] - 1
+        if iy1 - iy0 + 1 >= igeom[2]:
+            iy0 = 0
+            iy1 = igeom[2] - 1
+    elif mode == LATERAL_WALLS:
+        ix0 = max(ix0, 0)
+        iy0 = max(iy0, 0)
+        ix1 = min(ix1, igeom[1] - 1)
+        iy1 = min(iy1, igeom[2] - 1)
+    iz0 = int(math.floor(z0 / geom[6]))
+    if iz0 < 0:
+        iz0 = 0
+    iz1 = int(math.floor(z1 / geom[6]))
+    cap = buf.shape[0]
+    n = 0
+    for iy in range(iy0, iy1 + 1):
+        for ix in range(ix0, ix1 + 1):
+            col = column_lookup(igeom, hkeys, hval, ix, iy)
+            if col < 0:
+                continue
+            top = col_top[col]
+            if top < iz0:
+                continue
+            hi = iz1 if iz1 < top else top
+            for iz in range(iz0, hi + 1):
+                j = head[iz, col]
+                while j >= 0:
+                    if n >= cap:
+                        return -1
+                    buf[n] = j
+                    n += 1
+                    j = nxt[j]
+    return n
