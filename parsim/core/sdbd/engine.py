@@ -56,6 +56,9 @@ Boundary modelling choices (not in the paper):
 
 import math
 
+import time
+
+import numba
 import numpy as np
 
 from parsim.core.jit import jit
@@ -143,6 +146,7 @@ TWO_PI = 2.0 * math.pi
 D_MAX_OVERLAP = 0      # largest overlap seen after a move (debug), units of length
 D_EVENTS = 1           # decide/move steps, all particles
 D_CHUNKS = 2           # chunk ends (bookkeeping steps)
+D_CLOCKED_SECONDS = 3  # wall-clock seconds from the start of particle clock_from to the end
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -416,7 +420,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
                    particle_rotation, particle_drop_xy,
                    geom, igeom, head, col_top, nxt, hkeys, hval, counts,
                    floor_mode, trial_angle, cycle_n, cycle_eps, max_events, ell, r_max_sed,
-                   debug, trace_particle, trace,
+                   debug, trace_particle, trace, clock_from,
                    out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state,
                    out_events, diag):
     """Deposit all particles; returns ``(stopped_at, n_spheres_written)``.
@@ -429,6 +433,8 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     motion, number of contacts before the step, pivot contacts k and m, first executed
     event kind, angle or drop, number of executed events, centre of mass after the step,
     number of contacts after the step, and the obstacle index of up to 5 contacts.
+    ``diag[D_CLOCKED_SECONDS]`` receives the wall-clock time spent on particles
+    ``clock_from`` onwards (untouched when ``clock_from`` is not a particle index).
     """
     n_part = particle_shape.shape[0]
     lateral = igeom[0]
@@ -513,7 +519,10 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     n_chunks = 0
     stopped_at = -1
 
+    clock_start = 0.0
     for p in range(n_part):
+        if p == clock_from:
+            clock_start = _wall_clock()
         s = particle_shape[p]
         sc = particle_scale[p]
         i0 = shape_start[s]
@@ -1139,4 +1148,14 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     diag[D_MAX_OVERLAP] = max_ov
     diag[D_EVENTS] = n_steps
     diag[D_CHUNKS] = n_chunks
+    if 0 <= clock_from < n_part:
+        diag[D_CLOCKED_SECONDS] = _wall_clock() - clock_start
     return stopped_at, n_sed
+
+
+@jit(nogil=False)  # it takes the GIL for the interpreter call anyway
+def _wall_clock():
+    """``time.perf_counter()`` from inside a kernel (a short excursion to the interpreter)."""
+    with numba.objmode(now="float64"):
+        now = time.perf_counter()
+    return now
