@@ -12,25 +12,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from parsim.output.dataset import MEASURED_ATTRIBUTE, VOLATILE_ATTRIBUTES
+from tests.datasets import reproducible_part, run_serial
 from tests.mpi import mpiexec, parsim_command, run_mpi
 
 QUICKSTART = "jobs/quickstart.toml"
-
-
-def reproducible_part(path: Path) -> xr.Dataset:
-    """The dataset without timings and run-describing attributes: what must not change between runs."""
-    with xr.open_dataset(path) as dataset:
-        dataset = dataset.load()
-    measured = [name for name, v in dataset.data_vars.items() if v.attrs.get(MEASURED_ATTRIBUTE)]
-    dataset = dataset.drop_vars(measured)
-    for name in VOLATILE_ATTRIBUTES:
-        dataset.attrs.pop(name)
-    return dataset
-
-
-def run_serial(*arguments):
-    return subprocess.run([sys.executable, *parsim_command(*arguments)], capture_output=True, text=True, timeout=600)
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,8 @@ Unlike summing sphere volumes it counts the overlaps inside a multi-sphere parti
 once, and it is deterministic. With n points the error is close to 1/n (not the
 1/sqrt(n) of random sampling); the default 2·10^5 points per slab give about 10^-4.
 
-The horizontal box is periodic for both kernels (sediments of rigid walls lie inside
+Spheres are binned in cubic cells, so the cost per point or sphere does not grow with
+the height of the pile. The horizontal box is periodic for both kernels (sediments of rigid walls lie inside
 the box, so periodic wrapping changes nothing for them).
 """
 
@@ -75,7 +76,10 @@ def coordination(positions, radii, particle, particle_com_z, box_lower_xy, box_u
 
 
 class _SphereGrid:
-    """Spheres binned in vertical columns of a periodic horizontal grid, sorted by column."""
+    """Spheres binned in cubic cells (side >= the largest diameter), periodic in x and y.
+
+    Cells are 3D, so a query costs the same at any depth of the pile.
+    """
 
     def __init__(self, positions, radii, box_lower_xy, box_upper_xy):
         self.positions = np.ascontiguousarray(positions, dtype=np.float64)
@@ -86,19 +90,24 @@ class _SphereGrid:
         self.upper = np.asarray(box_upper_xy, dtype=np.float64)
         width = self.upper - self.lower
         reach = 2.0 * self.radii.max() if len(self.radii) else 1.0
-        self.cells = np.maximum(np.floor(width / reach), 1).astype(np.int64)
-        column = _column_index(self.positions, self.lower, width, self.cells)
-        self.order = np.argsort(column, kind="stable")
-        self.start = np.searchsorted(column[self.order], np.arange(self.cells[0] * self.cells[1] + 1))
+        z = self.positions[:, 2] if len(self.radii) else np.zeros(1)
+        self.z_lower = float(z.min())
+        self.cells = np.array([*np.maximum(np.floor(width / reach), 1), np.floor((z.max() - self.z_lower) / reach) + 1],
+                              dtype=np.int64)
+        self.cell_height = reach
+        cell = _cell_index(self.positions, self.lower, width, self.z_lower, reach, self.cells)
+        self.order = np.argsort(cell, kind="stable")
+        self.start = np.searchsorted(cell[self.order], np.arange(np.prod(self.cells) + 1))
 
     def arrays(self):
         return (self.positions[self.order], self.radii[self.order], self.order, self.start,
-                self.lower, self.upper, self.cells)
+                self.lower, self.upper, self.z_lower, self.cell_height, self.cells)
 
 
-def _column_index(positions, lower, width, cells):
-    ij = np.floor((positions[:, :2] - lower) / width * cells).astype(np.int64) % cells
-    return ij[:, 0] * cells[1] + ij[:, 1]
+def _cell_index(positions, lower, width, z_lower, cell_height, cells):
+    ij = np.floor((positions[:, :2] - lower) / width * cells[:2]).astype(np.int64) % cells[:2]
+    k = np.clip(np.floor((positions[:, 2] - z_lower) / cell_height).astype(np.int64), 0, cells[2] - 1)
+    return (ij[:, 0] * cells[1] + ij[:, 1]) * cells[2] + k
 
 
 def _halton_points(n, lower_xy, upper_xy, z_low, z_high):
@@ -121,37 +130,33 @@ def _van_der_corput(n, base):
 
 
 @jit
-def _neighbour_columns(ci, cj, cells, out):
-    """Fill ``out`` with the distinct columns around (ci, cj), periodic; return how many."""
+def _neighbour_cells(x, y, z, lower, width, z_lower, cell_height, cells, out):
+    """Fill ``out`` with the distinct cells around the point (periodic in x, y); return how many."""
+    ci = int(np.floor((x - lower[0]) / width[0] * cells[0])) % cells[0]
+    cj = int(np.floor((y - lower[1]) / width[1] * cells[1])) % cells[1]
+    ck = int(np.floor((z - z_lower) / cell_height))
     count = 0
     for a in range(min(3, cells[0])):
         i = (ci - 1 + a) % cells[0] if cells[0] >= 3 else a
         for b in range(min(3, cells[1])):
             j = (cj - 1 + b) % cells[1] if cells[1] >= 3 else b
-            out[count] = i * cells[1] + j
-            count += 1
+            for k in range(max(ck - 1, 0), min(ck + 2, cells[2])):
+                out[count] = (i * cells[1] + j) * cells[2] + k
+                count += 1
     return count
 
 
 @jit
-def _column_of(x, y, lower, width, cells):
-    ci = int(np.floor((x - lower[0]) / width[0] * cells[0])) % cells[0]
-    cj = int(np.floor((y - lower[1]) / width[1] * cells[1])) % cells[1]
-    return ci, cj
-
-
-@jit
-def _covered_count(points, centres, radii, order, start, lower, upper, cells):
+def _covered_count(points, centres, radii, order, start, lower, upper, z_lower, cell_height, cells):
     width = upper - lower
-    columns = np.empty(9, dtype=np.int64)
+    neighbours = np.empty(27, dtype=np.int64)
     covered = 0
     for p in range(points.shape[0]):
         x, y, z = points[p, 0], points[p, 1], points[p, 2]
-        ci, cj = _column_of(x, y, lower, width, cells)
-        n_columns = _neighbour_columns(ci, cj, cells, columns)
+        n_cells = _neighbour_cells(x, y, z, lower, width, z_lower, cell_height, cells, neighbours)
         found = False
-        for c in range(n_columns):
-            for k in range(start[columns[c]], start[columns[c] + 1]):
+        for c in range(n_cells):
+            for k in range(start[neighbours[c]], start[neighbours[c] + 1]):
                 dx = _minimum_image(x - centres[k, 0], width[0])
                 dy = _minimum_image(y - centres[k, 1], width[1])
                 dz = z - centres[k, 2]
@@ -166,15 +171,16 @@ def _covered_count(points, centres, radii, order, start, lower, upper, cells):
 
 
 @jit
-def _contacts_per_particle(positions, radii, particle, n_particles, tolerance, order, start, lower, upper, cells):
+def _contacts_per_particle(positions, radii, particle, n_particles, tolerance, order, start, lower, upper,
+                           z_lower, cell_height, cells):
     width = upper - lower
-    columns = np.empty(9, dtype=np.int64)
+    neighbours = np.empty(27, dtype=np.int64)
     contacts = np.zeros(n_particles)
     for i in range(positions.shape[0]):
-        ci, cj = _column_of(positions[i, 0], positions[i, 1], lower, width, cells)
-        n_columns = _neighbour_columns(ci, cj, cells, columns)
-        for c in range(n_columns):
-            for k in range(start[columns[c]], start[columns[c] + 1]):
+        n_cells = _neighbour_cells(positions[i, 0], positions[i, 1], positions[i, 2], lower, width, z_lower,
+                                   cell_height, cells, neighbours)
+        for c in range(n_cells):
+            for k in range(start[neighbours[c]], start[neighbours[c] + 1]):
                 j = order[k]
                 if particle[j] == particle[i]:
                     continue

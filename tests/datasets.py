@@ -1,0 +1,37 @@
+"""Comparing job outputs between runs."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import xarray as xr
+
+from parsim.output.dataset import MEASURED_ATTRIBUTE, VOLATILE_ATTRIBUTES
+from tests.mpi import parsim_command
+
+
+def reproducible_part(path: Path) -> xr.Dataset:
+    """The dataset without timings and run-describing attributes: what must not change between runs."""
+    with xr.open_dataset(path) as dataset:
+        dataset = dataset.load()
+    measured = [name for name, v in dataset.data_vars.items() if v.attrs.get(MEASURED_ATTRIBUTE)]
+    dataset = dataset.drop_vars(measured)
+    for name in VOLATILE_ATTRIBUTES:
+        dataset.attrs.pop(name)
+    return dataset
+
+
+def snapshot_arrays(path: Path) -> dict[str, np.ndarray]:
+    """Every dataset of a task file except its statistics group (which holds timings)."""
+    arrays = {}
+    with h5py.File(path, "r") as file:
+        file.visititems(lambda name, item: arrays.__setitem__(name, item[()])
+                        if isinstance(item, h5py.Dataset) and not name.startswith("statistics") else None)
+    return arrays
+
+
+def run_serial(*arguments, cwd=None):
+    return subprocess.run([sys.executable, *parsim_command(*arguments)], capture_output=True, text=True,
+                          timeout=900, cwd=cwd)
