@@ -24,15 +24,10 @@ looking for overlaps.  Plain numpy.
 
 import numpy as np
 
-LATERAL_PERIODIC = 0
-LATERAL_WALLS = 1
-LATERAL_NONE = 2
-FLOOR_STOP = 0
-FLOOR_ROLL = 1
-RESTING_THREE_CONTACTS = 0
-RESTING_ON_FLOOR = 1
-HANGING_ONE = 2
-HANGING_TWO = 3
+# Only the boundary and state codes (plain constants of the public API) come from the
+# package; nothing of the solver's computation is used.
+from parsim.core.sdbd import FLOOR_STOP, HANGING_ONE, HANGING_TWO, RESTING_ON_FLOOR, RESTING_THREE_CONTACTS
+from parsim.core.sdbd import LATERAL_NONE, LATERAL_PERIODIC, LATERAL_WALLS
 
 
 def _min_image(d, lateral, box):

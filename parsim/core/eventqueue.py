@@ -37,18 +37,17 @@ def _before(t1, s1, t2, s2):
 
 
 @jit
-def heap_push(times, seqs, data, size, t, seq, f0, f1, f2, f3, f4):
-    """Insert an event (capacity must exceed ``size``); returns the new size."""
-    k = size
-    while k > 0:
-        p = (k - 1) >> 1
-        if _before(times[p], seqs[p], t, seq):
-            break
-        times[k] = times[p]
-        seqs[k] = seqs[p]
-        for f in range(NFIELDS):
-            data[k, f] = data[p, f]
-        k = p
+def _move(times, seqs, data, src, dst):
+    """Copy the event in row ``src`` to row ``dst``."""
+    times[dst] = times[src]
+    seqs[dst] = seqs[src]
+    for f in range(NFIELDS):
+        data[dst, f] = data[src, f]
+
+
+@jit
+def _place(times, seqs, data, k, t, seq, f0, f1, f2, f3, f4):
+    """Write the event ``(t, seq, f0..f4)`` into row ``k``."""
     times[k] = t
     seqs[k] = seq
     data[k, 0] = f0
@@ -56,6 +55,19 @@ def heap_push(times, seqs, data, size, t, seq, f0, f1, f2, f3, f4):
     data[k, 2] = f2
     data[k, 3] = f3
     data[k, 4] = f4
+
+
+@jit
+def heap_push(times, seqs, data, size, t, seq, f0, f1, f2, f3, f4):
+    """Insert an event (capacity must exceed ``size``); returns the new size."""
+    k = size
+    while k > 0:
+        p = (k - 1) >> 1
+        if _before(times[p], seqs[p], t, seq):
+            break
+        _move(times, seqs, data, p, k)
+        k = p
+    _place(times, seqs, data, k, t, seq, f0, f1, f2, f3, f4)
     return size + 1
 
 
@@ -70,18 +82,9 @@ def _sift_down(times, seqs, data, size, k, t, seq, f0, f1, f2, f3, f4):
             c += 1
         if not _before(times[c], seqs[c], t, seq):
             break
-        times[k] = times[c]
-        seqs[k] = seqs[c]
-        for f in range(NFIELDS):
-            data[k, f] = data[c, f]
+        _move(times, seqs, data, c, k)
         k = c
-    times[k] = t
-    seqs[k] = seq
-    data[k, 0] = f0
-    data[k, 1] = f1
-    data[k, 2] = f2
-    data[k, 3] = f3
-    data[k, 4] = f4
+    _place(times, seqs, data, k, t, seq, f0, f1, f2, f3, f4)
 
 
 @jit
@@ -107,10 +110,7 @@ def heap_filter(times, seqs, data, size, keep):
     m = 0
     for k in range(size):
         if keep[k]:
-            times[m] = times[k]
-            seqs[m] = seqs[k]
-            for f in range(NFIELDS):
-                data[m, f] = data[k, f]
+            _move(times, seqs, data, k, m)
             m += 1
     for k in range((m - 2) // 2, -1, -1):
         _sift_down(times, seqs, data, m, k, times[k], seqs[k],

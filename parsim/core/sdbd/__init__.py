@@ -8,8 +8,10 @@ contacts, hangs on one or two, or (FLOOR_STOP) touches the floor.  Frustrated si
 events (4.3) are handled.
 
 Modules: :mod:`.rotation` (eq. 15, eqs. 13-14), :mod:`.events` (event solvers),
-:mod:`.decision` (steepest-descent choice), :mod:`.grid` (sediment grid),
-:mod:`.engine` (the deposition loop), :mod:`.constants`.
+:mod:`.decision` (steepest-descent choice), :mod:`.grid` (sediment grid), :mod:`.fall`
+(the fall search, 3.1), :mod:`.contacts` (contact lists), :mod:`.ties` (simultaneous
+events, 4.3), :mod:`.cycling` (criterion 34 and the creep test, 4.2), :mod:`.overlap`
+(debug overlap measurement), :mod:`.engine` (the deposition loop), :mod:`.constants`.
 
 The public entry point is :func:`deposit`.
 

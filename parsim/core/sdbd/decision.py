@@ -101,6 +101,28 @@ def _all_open(n_c, skip1, skip2, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, 
 
 
 @jit
+def _offset_from_pivot(com, cP, k):
+    """``d = r_cm - P_k``, its length and the length of its horizontal part."""
+    d0 = com[0] - cP[k, 0]
+    d1 = com[1] - cP[k, 1]
+    d2 = com[2] - cP[k, 2]
+    return d0, d1, d2, math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), math.sqrt(d0 * d0 + d1 * d1)
+
+
+@jit
+def _pair_axis(cP, k, m, ell):
+    """``(True, u)``, u the unit vector from pivot ``k`` to pivot ``m``; ``(False, 0)`` when
+    the two pivots are one point (no axis through them)."""
+    u0 = cP[m, 0] - cP[k, 0]
+    u1 = cP[m, 1] - cP[k, 1]
+    u2 = cP[m, 2] - cP[k, 2]
+    L = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    if L <= _SAME_PIVOT * ell:
+        return False, 0.0, 0.0, 0.0
+    return True, u0 / L, u1 / L, u2 / L
+
+
+@jit
 def decide(com, n_c, ca, cP, cN, ckind, cD, cc0, ell, out):
     """Choose the motion; returns ``(motion, k, m, slope)``.
 
@@ -123,11 +145,7 @@ def decide(com, n_c, ca, cP, cN, ckind, cD, cc0, ell, out):
     bm = -1
     # rotation on one contact
     for k in range(n_c):
-        d0 = com[0] - cP[k, 0]
-        d1 = com[1] - cP[k, 1]
-        d2 = com[2] - cP[k, 2]
-        dn = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        dh = math.sqrt(d0 * d0 + d1 * d1)
+        d0, d1, d2, dn, dh = _offset_from_pivot(com, cP, k)
         if dn <= TINY * ell or dh <= DESCENT_TOL * dn:
             continue
         slope = dh / dn
@@ -147,15 +165,9 @@ def decide(com, n_c, ca, cP, cN, ckind, cD, cc0, ell, out):
     # rotation on two contacts
     for k in range(n_c):
         for m in range(k + 1, n_c):
-            u0 = cP[m, 0] - cP[k, 0]
-            u1 = cP[m, 1] - cP[k, 1]
-            u2 = cP[m, 2] - cP[k, 2]
-            L = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-            if L <= _SAME_PIVOT * ell:
+            ok, u0, u1, u2 = _pair_axis(cP, k, m, ell)
+            if not ok:
                 continue
-            u0 /= L
-            u1 /= L
-            u2 /= L
             d0 = com[0] - cP[k, 0]
             d1 = com[1] - cP[k, 1]
             d2 = com[2] - cP[k, 2]
@@ -181,11 +193,7 @@ def decide(com, n_c, ca, cP, cN, ckind, cD, cc0, ell, out):
     if motion == MOTION_REST:
         # unstable equilibria: centre of mass straight above a pivot
         for k in range(n_c):
-            d0 = com[0] - cP[k, 0]
-            d1 = com[1] - cP[k, 1]
-            d2 = com[2] - cP[k, 2]
-            dn = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            dh = math.sqrt(d0 * d0 + d1 * d1)
+            d0, d1, d2, dn, dh = _offset_from_pivot(com, cP, k)
             if dn <= TINY * ell or dh > DESCENT_TOL * dn or d2 <= 0.0:
                 continue
             for t in range(4):
@@ -210,15 +218,9 @@ def decide(com, n_c, ca, cP, cN, ckind, cD, cc0, ell, out):
         # ... or straight above the axis of two pivots (top of its circle)
         for k in range(n_c):
             for m in range(k + 1, n_c):
-                u0 = cP[m, 0] - cP[k, 0]
-                u1 = cP[m, 1] - cP[k, 1]
-                u2 = cP[m, 2] - cP[k, 2]
-                L = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-                if L <= _SAME_PIVOT * ell:
+                ok, u0, u1, u2 = _pair_axis(cP, k, m, ell)
+                if not ok:
                     continue
-                u0 /= L
-                u1 /= L
-                u2 /= L
                 if 1.0 - abs(u2) <= DESCENT_TOL:
                     continue  # vertical axis: no height change
                 d0 = com[0] - cP[k, 0]

@@ -62,6 +62,7 @@ __all__ = [
     "POLICY_NEW",
     "POLICY_TRUSTED",
     "arc_frame",
+    "arc_range",
     "circle_entry",
     "first_entry",
     "sphere_coefficients",
@@ -117,6 +118,29 @@ def arc_frame(x, pivot, axis, e1, e2):
     e2[1] = axis[2] * p0 - axis[0] * p2
     e2[2] = axis[0] * p1 - axis[1] * p0
     return h, rho
+
+
+@jit
+def arc_range(rho, e1k, e2k, phi_lim):
+    """Range of ``rho (e1k cos phi + e2k sin phi)`` over ``[0, phi_lim]``: the extent, along
+    one coordinate, of the arc ``phi in [0, phi_lim]`` of a circle of :func:`arc_frame`
+    (``e1k, e2k`` the components of ``e1, e2``)."""
+    f0 = rho * e1k
+    f1 = rho * (e1k * math.cos(phi_lim) + e2k * math.sin(phi_lim))
+    lo = min(f0, f1)
+    hi = max(f0, f1)
+    m = rho * math.sqrt(e1k * e1k + e2k * e2k)
+    th = math.atan2(e2k, e1k)
+    if th < 0.0:
+        th += TWO_PI
+    if th <= phi_lim:
+        hi = m
+    th += math.pi
+    if th >= TWO_PI:
+        th -= TWO_PI
+    if th <= phi_lim:
+        lo = -m
+    return lo, hi
 
 
 @jit

@@ -40,6 +40,8 @@ __all__ = [
     "grid_new",
     "grid_insert",
     "grid_collect",
+    "grid_collect_growing",
+    "column_range",
     "column_lookup",
     "wrap_position",
     "min_image",
@@ -186,11 +188,8 @@ def grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, x, y, z
     """Add sphere ``j`` with (wrapped) centre ``x, y, z``; returns the possibly grown arrays
     ``(head, col_top, hkeys, hval)``."""
     ix, iy = _column_index(geom, x, y)
-    mode = igeom[0]
-    if mode == LATERAL_PERIODIC:
-        ix = min(max(ix, 0), igeom[1] - 1)
-        iy = min(max(iy, 0), igeom[2] - 1)
-    elif mode == LATERAL_WALLS:
+    if igeom[0] != LATERAL_NONE:
+        # the centre is inside the box: keep round-off at its faces in the outer columns
         ix = min(max(ix, 0), igeom[1] - 1)
         iy = min(max(iy, 0), igeom[2] - 1)
     col = column_lookup(igeom, hkeys, hval, ix, iy)
@@ -211,13 +210,12 @@ def grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, x, y, z
     return head, col_top, hkeys, hval
 
 
-@jit
-def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z0, z1, buf):
-    """Indices of the spheres whose cells meet the box ``[x0,x1] x [y0,y1] x [z0,z1]``.
+@jit(inline="always")  # part of grid_collect, the most frequent query of the engine
+def column_range(geom, igeom, x0, x1, y0, y1):
+    """Integer columns ``ix0..ix1, iy0..iy1`` that meet ``[x0, x1] x [y0, y1]``.
 
-    Writes them into ``buf`` and returns their number, or ``-1`` if ``buf`` is too small
-    (the caller grows it and asks again).  Each sphere is listed once even when a periodic
-    query box is wider than the box itself; the caller applies minimum images.
+    A periodic range as wide as the box is cut to one period (each column once); a walled
+    box clips it to the existing columns.  Returns ``(ix0, ix1, iy0, iy1)``.
     """
     mode = igeom[0]
     ix0, iy0 = _column_index(geom, x0, y0)
@@ -234,6 +232,19 @@ def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z
         iy0 = max(iy0, 0)
         ix1 = min(ix1, igeom[1] - 1)
         iy1 = min(iy1, igeom[2] - 1)
+    return ix0, ix1, iy0, iy1
+
+
+@jit
+def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z0, z1, buf):
+    """Indices of the spheres whose cells meet the box ``[x0,x1] x [y0,y1] x [z0,z1]``.
+
+    Writes them into ``buf`` and returns their number, or ``-1`` if ``buf`` is too small
+    (:func:`grid_collect_growing` grows it and asks again).  Each sphere is listed once
+    even when a periodic query box is wider than the box itself; the caller applies
+    minimum images.
+    """
+    ix0, ix1, iy0, iy1 = column_range(geom, igeom, x0, x1, y0, y1)
     iz0 = int(math.floor(z0 / geom[6]))
     if iz0 < 0:
         iz0 = 0
@@ -258,3 +269,14 @@ def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z
                     n += 1
                     j = nxt[j]
     return n
+
+
+@jit
+def grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z0, z1, buf):
+    """:func:`grid_collect` with a buffer that is doubled until it holds them all;
+    returns ``(count, buf)``."""
+    while True:
+        cnt = grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z0, z1, buf)
+        if cnt >= 0:
+            return cnt, buf
+        buf = np.empty(2 * buf.shape[0], dtype=np.int64)

@@ -1,0 +1,43 @@
+"""Debug measure of a move: the largest overlap of the moving particle with the sediment,
+the floor and the walls (``check_overlaps`` of :func:`parsim.core.sdbd.deposit_with_diagnostics`)."""
+
+import math
+
+import numpy as np
+
+from parsim.core.jit import jit
+from parsim.core.sdbd.grid import grid_collect_growing, min_image
+
+__all__ = ["max_overlap"]
+
+
+@jit
+def max_overlap(n, pos, rad, sed, sed_r, geom, igeom, head, col_top, nxt, hkeys, hval,
+                r_max_sed, lateral_walls, buf):
+    """Largest overlap of the moving spheres with the sediment, the floor and walls;
+    returns it and the (possibly grown) query buffer."""
+    worst = -np.inf
+    for i in range(n):
+        reach = rad[i] + r_max_sed
+        cnt, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval,
+                                        pos[i, 0] - reach, pos[i, 0] + reach, pos[i, 1] - reach,
+                                        pos[i, 1] + reach, pos[i, 2] - reach, pos[i, 2] + reach, buf)
+        for q in range(cnt):
+            j = buf[q]
+            dx, dy = min_image(geom, igeom, sed[j, 0] - pos[i, 0], sed[j, 1] - pos[i, 1])
+            dz = sed[j, 2] - pos[i, 2]
+            ov = rad[i] + sed_r[j] - math.sqrt(dx * dx + dy * dy + dz * dz)
+            if ov > worst:
+                worst = ov
+        ov = rad[i] - pos[i, 2]
+        if ov > worst:
+            worst = ov
+        if lateral_walls:
+            for k in range(2):
+                ov = geom[k] + rad[i] - pos[i, k]
+                if ov > worst:
+                    worst = ov
+                ov = pos[i, k] + rad[i] - geom[k] - geom[2 + k]
+                if ov > worst:
+                    worst = ov
+    return worst, buf

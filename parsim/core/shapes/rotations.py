@@ -1,0 +1,61 @@
+"""Uniform random orientations and the rotation of offsets by unit quaternions.
+
+Quaternions are ``(w, x, y, z)`` with ``w`` the scalar part; :func:`rotate` applies the
+active rotation ``v -> q v q*`` to row vectors.
+"""
+
+import numpy as np
+
+from parsim.core.shapes.checks import _check_int
+
+# Quaternions passed to rotate() must have |q| within this of 1.
+QUATERNION_NORM_ATOL = 1e-6
+
+
+def random_rotations(n, rng):
+    """``n`` uniformly distributed unit quaternions ``(w, x, y, z)``, shape (n, 4).
+
+    Shoemake's method ("Uniform random rotations", Graphics Gems III, 1992): with
+    ``u1, u2, u3`` uniform on [0, 1), ``q = (sqrt(u1) cos 2pi u3, sqrt(1-u1) sin 2pi u2,
+    sqrt(1-u1) cos 2pi u2, sqrt(u1) sin 2pi u3)`` is uniform on the unit 3-sphere, hence the
+    rotation is uniform (Haar) on SO(3).  Uses ``rng.random((n, 3))`` only.
+    """
+    n = _check_int("n", n, 0)
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    u = rng.random((n, 3))
+    a = np.sqrt(1.0 - u[:, 0])
+    b = np.sqrt(u[:, 0])
+    t2 = 2.0 * np.pi * u[:, 1]
+    t3 = 2.0 * np.pi * u[:, 2]
+    return np.stack([b * np.cos(t3), a * np.sin(t2), a * np.cos(t2), b * np.sin(t3)], axis=1)
+
+
+def rotate(offsets, quaternion):
+    """Rotate row vectors by a unit quaternion ``(w, x, y, z)``: ``v -> q v q*``.
+
+    ``offsets`` (k, 3); returns a new (k, 3) array ``offsets @ R.T`` with ``R`` the
+    rotation matrix of ``q``.  ``|q|`` must be 1 within ``QUATERNION_NORM_ATOL``; it is
+    normalised before use.
+    """
+    try:
+        v = np.array(offsets, dtype=np.float64)
+        q = np.array(quaternion, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError("offsets must be a (k, 3) and quaternion a (4,) numeric array") from None
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"offsets must have shape (k, 3), got {v.shape}")
+    if q.shape != (4,) or not np.all(np.isfinite(q)):
+        raise ValueError(f"quaternion must be 4 finite numbers (w, x, y, z), got shape {q.shape}")
+    norm = float(np.sqrt(np.sum(q * q)))
+    if abs(norm - 1.0) > QUATERNION_NORM_ATOL:
+        raise ValueError(f"quaternion must have unit norm (within {QUATERNION_NORM_ATOL}), got {norm!r}")
+    w, x, y, z = q / norm
+    R = np.array(
+        [
+            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+            [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+            [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+        ]
+    )
+    return v @ R.T
