@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from parsim.core import sdbd
+from parsim.core import shapes as shape_library
 from parsim.core.sdbd.constants import OVERLAP_LIMIT
 from parsim.core.sdbd import (
     EVENT_KINDS,
@@ -334,3 +335,31 @@ def test_complex_particle_sediments(name, shape, P, L, lateral, floor):
     assert counts[KIND["second_contact"]] > 0 and counts[KIND["third_contact"]] > 0
     if lateral == LATERAL_WALLS:
         assert counts[KIND["wall_contact"]] > 0
+
+
+# ----------------------------------------------------------------------------- regressions
+def test_frustrated_creep_at_a_small_trial_angle_terminates():
+    """Regression: a cube (L = 5) creeping through a frustrated situation (4.1) in steps of
+    the trial angle 1e-4 - roll on two contacts until one releases (eq. 25), virtual
+    rotation, roll on one until the released contact closes again - reaches the end of the
+    frustration, where the released contact opens at a rate ~5e-8 and closes again after
+    ~1e-6 rad.  The re-entry was computed from the roots of (*) with the measured gap; a
+    round-off overlap of 1.5e-14 made them vanish, the cube rolled 0.11 rad through the
+    sediment sphere (overlap 6e-4) and then looped at zero angle until the event limit.
+    The sediment particle is the cube of the reproducer (particle 94 of a 97-cube run) in
+    its final orientation, dropped onto the floor; the second cube is the stuck one."""
+    o, r = shape_library.cube(5)
+    rot = np.array([[0.6134563110245619, -0.5092537849187883, -0.5571093099590351, -0.23229540194974224],
+                    [-0.12551875755272898, 0.12151751581195024, -0.5524460452225007, 0.8150349084372585]])
+    xy = np.array([[19.96644421551475, 11.355398053948711],
+                   [18.087311214452285, 11.55776516992458]])
+    res = run([(o, r)], [0, 0], xy, LATERAL_PERIODIC, FLOOR_STOP, (0, 0), (20, 20), rot=rot,
+              scale=np.full(2, 0.5), trial_angle=1e-4, max_events_per_particle=20_000)
+    assert res.stopped_at == -1
+    assert list(res.state) == [RESTING_ON_FLOOR, RESTING_ON_FLOOR]
+    ec = res.event_counts[1]
+    # it did creep (about 350 rounds of second contact / release / trial rotation) ...
+    assert ec[KIND["second_contact"]] > 300 and ec[KIND["loss_of_one_contact"]] > 300
+    assert ec[KIND["frustrated_trial_rotation"]] > 300
+    # ... and got through: a few more events after the creep
+    assert ec.sum() < 3000

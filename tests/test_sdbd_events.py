@@ -498,3 +498,32 @@ def test_touching_obstacle_policies():
     brute = first_true(lambda p: np.linalg.norm(rotate(a, pivot, axis, p) - s_above, axis=-1)
                        < 2.0 - 1e-12, TWO_PI)
     assert phi > 1.0 and abs(phi - brute) < 1e-6
+
+
+def test_released_contact_grazing_back_in_with_a_round_off_overlap():
+    """A touching contact that opens slowly and curves back in: its re-entry must be found
+    whatever the sign of the round-off gap.  The circle of ``a`` (radius 1 about the z axis)
+    lies inside the sphere of radius ``D`` about ``s`` except on the arc ``(0, 2 w)``; with
+    the gap -1e-14 the roots of (*) near 0 vanish (``w < sqrt(|gap| / curvature)``), and a
+    re-entry computed from them is lost (the cube L = 5 of the 97-particle reproducer rolled
+    0.11 rad through a sediment sphere and then looped forever at zero angle)."""
+    pivot = np.zeros(3)
+    axis = np.array([0.0, 0.0, 1.0])
+    a = np.array([1.0, 0.0, 0.0])
+    d = 0.2
+    for w in (1e-7, 3e-7, 1e-5):
+        psi = w - math.pi
+        s = d * np.array([math.cos(psi), math.sin(psi), 0.0])
+        for gap in (-1e-14, 0.0, 1e-14):
+            D = np.linalg.norm(a - s) - gap
+            for policy in (ev.POLICY_TRUSTED, ev.POLICY_NEW):
+                phi, c, sn = ev.sphere_contact_angle(a, pivot, axis, s, D, 1.0, policy)
+                assert abs(phi - 2 * w) < 1e-3 * w, (w, gap, policy, phi)
+                assert abs(c - math.cos(phi)) < 1e-15 and abs(sn - math.sin(phi)) < 1e-15
+                # the contact closes there (within the touching tolerance) ...
+                x = rotate(a, pivot, axis, phi)[0]
+                assert abs(np.linalg.norm(x - s) - D) < 1e-12
+                # ... and not before: open at half the angle (c w^2 above round-off)
+                if w >= 1e-5:
+                    x = rotate(a, pivot, axis, 0.5 * phi)[0]
+                    assert np.linalg.norm(x - s) - D > gap + 1e-12

@@ -182,17 +182,40 @@ def first_entry(A, B, K, gap, gscale, ell, policy):
       root at 0 is the exit and the next entry is returned;
     * ``POLICY_TRUSTED``: the root at 0 is skipped.
 
+    A touching point that leaves the obstacle at first order (``B < 0``) is at the exit
+    root ``phi = 0`` of the touching position (gap 0, ``K = A``), and its next entry is the
+    other root of ``A (cos phi - 1) + B sin phi = 0``, ``tan(phi / 2) = B / A``::
+
+        cos phi = (A^2 - B^2) / M^2,   sin phi = 2 A B / M^2,
+
+    which lies in ``(0, pi)`` when the circle curves back into the obstacle (``A < 0``,
+    ``phi ~ 2 B / A``).  The roots of (*) with the measured gap are not used there: the two
+    roots near 0 are ``~ 2 |B| / |A|`` apart and a round-off gap of either sign shifts
+    them by ``~ gap gscale / |B|``, so when the point leaves slowly (``B^2 <~ |A| gap
+    gscale``) a gap of -1e-14 makes them vanish and the re-entry would be lost (the
+    sphere would roll on through the obstacle).
+
     Returns ``(phi, cos phi, sin phi)``, ``phi = inf`` if there is no event.
     """
     touching = abs(gap) <= TOUCH_TOL * ell
-    if touching and policy == POLICY_NEW:
-        tb = RATE_TOL * ell * gscale
-        if B > tb:
-            return 0.0, 1.0, 0.0
-        if B >= -tb:
-            df = A * (math.cos(PROBE_ANGLE) - 1.0) + B * math.sin(PROBE_ANGLE)
-            if df > PROBE_TOL * ell * gscale:
+    if touching:
+        if policy == POLICY_NEW:
+            tb = RATE_TOL * ell * gscale
+            if B > tb:
                 return 0.0, 1.0, 0.0
+            if B >= -tb:
+                df = A * (math.cos(PROBE_ANGLE) - 1.0) + B * math.sin(PROBE_ANGLE)
+                if df > PROBE_TOL * ell * gscale:
+                    return 0.0, 1.0, 0.0
+        if B < 0.0:
+            # leaving: the next entry of the touching position, gap snapped to 0
+            M2 = A * A + B * B
+            c = (A * A - B * B) / M2
+            s = 2.0 * A * B / M2
+            phi = math.atan2(s, c)
+            if phi < 0.0:
+                phi += TWO_PI
+            return phi, c, s
     phi, c, s = circle_entry(A, B, K)
     if phi == np.inf:
         return phi, c, s
