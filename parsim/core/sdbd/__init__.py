@@ -186,6 +186,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     ``diagnostics["trace"]`` (see :func:`engine.run_deposition`).
     """
     from parsim.core.sdbd import engine, grid
+    from parsim.core.sdbd.rotation import quat_to_matrix
 
     offsets = np.ascontiguousarray(shape_offsets, dtype=np.float64)
     radii = np.ascontiguousarray(shape_radii, dtype=np.float64)
@@ -264,19 +265,13 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
                 f"i.e. {need:g}, so that minimum images are unambiguous")
     if lateral == LATERAL_WALLS and P:
         # the caller guarantees that each particle starts inside; check it
-        w, x, y, z = prot.T
-        R = np.empty((P, 3, 3))
-        R[:, 0, 0] = 1 - 2 * (y * y + z * z)
-        R[:, 0, 1] = 2 * (x * y - w * z)
-        R[:, 0, 2] = 2 * (x * z + w * y)
-        R[:, 1, 0] = 2 * (x * y + w * z)
-        R[:, 1, 1] = 1 - 2 * (x * x + z * z)
-        R[:, 1, 2] = 2 * (y * z - w * x)
+        matrix = np.empty((3, 3))
         for p in range(P):
             s = pshape[p]
             o = pscale[p] * offsets[start[s]:start[s + 1]]
             r = pscale[p] * radii[start[s]:start[s + 1]]
-            xy = pxy[p] + o @ R[p, :2, :].T
+            quat_to_matrix(prot[p], matrix)
+            xy = pxy[p] + o @ matrix[:2, :].T
             tol = 1e-9 * ell
             if np.any(xy - r[:, None] < lo - tol) or np.any(xy + r[:, None] > hi + tol):
                 raise ValueError(f"particle {p}: dropped at {tuple(pxy[p])}, it does not fit inside the walls")
