@@ -306,7 +306,6 @@ def test_wall_contact_random():
 def two_contact_setup(rng):
     """Particle touching two sediment spheres s1, s2 with spheres a1, a2."""
     while True:
-        rs = 1.0
         s1 = np.zeros(3)
         s2 = np.array([rng.uniform(1.5, 3.5), rng.uniform(-1, 1), rng.uniform(-0.8, 0.8)])
         u = unit(s2 - s1)

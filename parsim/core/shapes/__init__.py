@@ -55,31 +55,11 @@ Numba caches each kernel by its own source file: after editing a callee module (
 :mod:`.superellipsoid_distance`), delete the ``*.nbi``/``*.nbc`` files in ``__pycache__``.
 """
 
-from parsim.core.shapes.checks import SPACING_RTOL
 from parsim.core.shapes.extents import bounding_radius, extent_below_com
-from parsim.core.shapes.medial_balls import COVERED_ATOL, INSIDE_ATOL, MEDIAL_RTOL, PROGRESS_FRACTION
-from parsim.core.shapes.rotations import QUATERNION_NORM_ATOL, random_rotations, rotate
+from parsim.core.shapes.rotations import random_rotations, rotate
 from parsim.core.shapes.simple import agglomerate, cube, four_rods, rod, sphere, spiky, tripod
-from parsim.core.shapes.smooth import (
-    MAX_EXPONENT,
-    MIN_SURFACE_SAMPLES,
-    SUPPORT_GRID_SIZE,
-    SUPPORT_STARTS,
-    SURFACE_SAMPLES_PER_SPHERE,
-    VERIFY_STARTS,
-    ellipsoid,
-    superellipsoid,
-)
-from parsim.core.shapes.superellipsoid_distance import (
-    ARMIJO_C,
-    HESSIAN_FD_STEP,
-    NEWTON_CONVERGED_RTOL,
-    NEWTON_GRADIENT_RTOL,
-    NEWTON_MAX_ITERATIONS,
-    NEWTON_MAX_STEP,
-    START_SEPARATION,
-)
-from parsim.core.shapes.union import DEFAULT_UNION_RESOLUTION, OVERLAP_RTOL, centre_of_mass_of_union
+from parsim.core.shapes.smooth import ellipsoid, superellipsoid
+from parsim.core.shapes.union import DEFAULT_UNION_RESOLUTION, centre_of_mass_of_union
 
 __all__ = [
     "DEFAULT_UNION_RESOLUTION",
