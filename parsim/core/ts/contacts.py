@@ -1,0 +1,146 @@
+"""Contact searches of the time-stepping method, all on cell lists (section 3, remark on
+boxes of side ``l > 2 max R``).
+
+A pair is *in contact* when ``phi_ij >= 0`` (eq. 3.2), that is ``|X_i - X_j| <= R_i + R_j``.
+"""
+
+import numpy as np
+
+from parsim.core.celllist import block_cells, build_cells, cell_index, grid_size, neighbour_offsets
+from parsim.core.jit import jit
+from parsim.core.ts.links import are_linked
+
+
+@jit
+def _grow(pairs, count):
+    if count < pairs.shape[0]:
+        return pairs
+    bigger = np.empty((2 * pairs.shape[0] + 16, 2), dtype=np.int64)
+    bigger[:count] = pairs[:count]
+    return bigger
+
+
+@jit
+def _distance_sq(X, i, j):
+    s = 0.0
+    for a in range(X.shape[1]):
+        dx = X[i, a] - X[j, a]
+        s += dx * dx
+    return s
+
+
+@jit
+def cross_cluster_contacts(X, R, cluster, side, k):
+    """Pairs ``i < j`` of spheres of different clusters in contact, shape ``(m, 2)``.
+
+    The grid (``k`` cells per side of length ``side >= 2 max R``) covers the box.
+    """
+    n, d = X.shape
+    head, nxt, _, cell_of, _ = build_cells(X, side, k)
+    offsets = neighbour_offsets(d)
+    coords = np.empty(d, dtype=np.int64)
+    block = np.empty(offsets.shape[0], dtype=np.int64)
+    pairs = np.empty((16, 2), dtype=np.int64)
+    count = 0
+    for i in range(n):
+        nb = block_cells(cell_of[i], k, offsets, coords, block)
+        for b in range(nb):
+            j = head[block[b]]
+            while j >= 0:
+                if j > i and cluster[j] != cluster[i]:
+                    contact = R[i] + R[j]
+                    if _distance_sq(X, i, j) <= contact * contact:
+                        pairs = _grow(pairs, count)
+                        pairs[count, 0] = i
+                        pairs[count, 1] = j
+                        count += 1
+                j = nxt[j]
+    return pairs[:count].copy()
+
+
+@jit
+def unlinked_contacts(X, R, moved, side, k, link_head, link_next, link_to):
+    """Pairs in contact with at least one sphere in ``moved`` that are not linked (eq. 3.2).
+
+    ``moved`` is a sorted index array; a pair of two moved spheres is reported once.
+    """
+    n, d = X.shape
+    head, nxt, _, _, _ = build_cells(X, side, k)
+    offsets = neighbour_offsets(d)
+    coords = np.empty(d, dtype=np.int64)
+    block = np.empty(offsets.shape[0], dtype=np.int64)
+    is_moved = np.zeros(n, dtype=np.bool_)
+    for i in moved:
+        is_moved[i] = True
+    pairs = np.empty((16, 2), dtype=np.int64)
+    count = 0
+    for i in moved:
+        nb = block_cells(cell_index(X[i], side, k), k, offsets, coords, block)
+        for b in range(nb):
+            j = head[block[b]]
+            while j >= 0:
+                if j != i and not (is_moved[j] and j < i):
+                    contact = R[i] + R[j]
+                    if _distance_sq(X, i, j) <= contact * contact and not are_linked(link_head, link_next, link_to, i, j):
+                        pairs = _grow(pairs, count)
+                        pairs[count, 0] = min(i, j)
+                        pairs[count, 1] = max(i, j)
+                        count += 1
+                j = nxt[j]
+    return pairs[:count].copy()
+
+
+@jit
+def _candidate_pairs(P, R, n_moving, reach, side, k):
+    n, d = P.shape
+    head, nxt, _, cell_of, _ = build_cells(P, side, k)
+    offsets = neighbour_offsets(d)
+    coords = np.empty(d, dtype=np.int64)
+    block = np.empty(offsets.shape[0], dtype=np.int64)
+    pairs = np.empty((16, 2), dtype=np.int64)
+    count = 0
+    for i in range(n_moving):
+        nb = block_cells(cell_of[i], k, offsets, coords, block)
+        for b in range(nb):
+            j = head[block[b]]
+            while j >= 0:
+                if j > i or j >= n_moving:  # anchor pairs are seen from the moving end only
+                    limit = R[i] + R[j] + reach
+                    if _distance_sq(P, i, j) < limit * limit:
+                        pairs = _grow(pairs, count)
+                        pairs[count, 0] = i
+                        pairs[count, 1] = j
+                        count += 1
+                j = nxt[j]
+    return pairs[:count].copy()
+
+
+def candidate_pairs(P, R, n_moving, reach):
+    """Local pairs ``a < b`` with a moving end and a gap below ``reach`` (the candidates).
+
+    ``P`` are local positions, the first ``n_moving`` moving; the cell grid covers their
+    bounding box only.  Returns ``(pair_a, pair_b)``, sorted by ``(a, b)``.
+    """
+    if P.shape[0] < 2 or n_moving == 0:
+        empty = np.empty(0, dtype=np.int64)
+        return empty, empty
+    lower = P.min(axis=0)
+    shifted = P - lower
+    extent = float(shifted.max()) + 1e-12
+    cutoff = 2.0 * float(R.max()) + reach
+    k, side = grid_size(max(extent, cutoff), cutoff, P.shape[1], P.shape[0])
+    pairs = _candidate_pairs(shifted, R, n_moving, reach, side, k)
+    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+    return np.ascontiguousarray(pairs[order, 0]), np.ascontiguousarray(pairs[order, 1])
+
+
+def incidence(pair_a, pair_b, n_moving):
+    """CSR lists of the pairs incident to each moving sphere: ``(ptr, pair_of)``."""
+    ends = np.concatenate([pair_a, pair_b])
+    ids = np.concatenate([np.arange(pair_a.size), np.arange(pair_b.size)])
+    keep = ends < n_moving
+    ends, ids = ends[keep], ids[keep]
+    order = np.argsort(ends, kind="stable")
+    ptr = np.zeros(n_moving + 1, dtype=np.int64)
+    np.add.at(ptr, ends + 1, 1)
+    return np.cumsum(ptr), np.ascontiguousarray(ids[order], dtype=np.int64)

@@ -1,0 +1,311 @@
+"""The damped Arrow–Hurwicz algorithm (DAHA) of Degond et al. 2024, section 3.2.
+
+It looks for a configuration of the *moving* spheres that minimises the attraction
+``W`` over the linked pairs (eq. 3.5; eq. 3.30 with the indicator ``H_W`` in the
+almost-rigid form) under the smooth non-overlap constraints
+``phi_ij = (R_i + R_j)^2 - |X_i - X_j|^2 <= 0`` (eq. 3.4) on the candidate pairs.
+*Anchor* spheres (the outer rectangles of section 3.3) are read but never moved.
+
+Signs.  The damped system (3.15)–(3.16) reads, with ``grad_i phi_ij = -2 (X_i - X_j)``,
+
+    X_i'' = -alpha (grad_i W + sum_j lambda_ij grad_i phi_ij) - c_i X_i'
+            - gamma sum_j phi_ij lambda_ij grad_i phi_ij,
+    lambda_ij' = beta phi_ij   (held at 0 while lambda_ij = 0 and phi_ij < 0).
+
+Its right-hand side is a force pulling linked spheres together and pushing
+overlapping ones apart.  The printed discrete scheme (3.20)–(3.23) moves the
+positions by ``-delta/2 V`` with ``V`` along that force, an *ascent*, and evaluates
+the force at ``X^{r+1}`` before it is known.  We use the damped leapfrog that is a
+consistent discretisation of (3.15) (drift, kick, damp, drift):
+
+    X^{r+1/2} = X^r + (delta/2) U^r                                  (3.20)
+    U^{r+1/2} = U^r + delta F(X^{r+1/2}, lambda^r)                   (3.21)
+    U^{r+1}   = (1 - delta c_i) U^{r+1/2}, delta c_i clipped to [0, 1] (3.22)
+    X^{r+1}   = X^{r+1/2} + (delta/2) U^{r+1}                        (3.23)
+    lambda^{r+1} = max(0, lambda^r + delta beta phi(X^{r+1}))         (3.24)
+
+so ``alpha~ = delta alpha``, ``gamma~ = delta gamma``, ``beta~ = delta beta`` and
+``c~ = delta c`` as in the paper.  Every moving sphere is updated from the previous
+iterate (Jacobi): forces are gathered per sphere from its own link and pair lists,
+and a multiplier depends only on the two positions of its pair, so splitting the
+spheres among tiles or ranks changes nothing but the order of floating-point sums.
+
+Stability.  Linearising (3.15)–(3.16) about a linked pair at contact (distance
+``s = R_i + R_j``, ``lambda = 1/2``) gives for the gap ``x``
+``x''' + c x'' + 4 gamma s^2 x' + 8 alpha beta s^2 x = 0``, stable (Routh–Hurwitz) only
+if ``c gamma > 2 alpha beta``.  The values of eq. 4.1 (c = 1.3, gamma = 0.3,
+alpha = 0.3, beta = 3) violate it (0.39 < 1.8): linked pairs then bounce about contact
+for ever and, as we measured, DAHA does not meet (3.27) on clumps of 20 discs or more.
+Our defaults keep delta, alpha, beta_bar, eps_c and eps_s of (4.1) and take
+``c = 3``, ``gamma = 10`` (30 > 1.8), constant, which converges on every case we ran.
+
+Dynamic parameters (3.29), with ``dynamic = True``:
+``c_i = c_bar (1 + |delta |U_i| - phi_i^A| / phi_A)`` and ``beta = beta_bar sqrt(n) / phi_A``
+with ``n`` the number of moving spheres, ``phi_i^A`` the mean overlap of sphere ``i``
+over its links and ``phi_A`` the mean overlap of the overlapping pairs.  Overlaps are
+measured as in (3.28), ``o_ij = sqrt(max(0, phi_ij))`` (a length).  The printed law
+``c_i = c_bar |...| / phi_A`` can freeze a sphere at rest or leave one undamped; the
+``1 +`` keeps ``c_i >= c_bar``.  Each multiplier's rate is capped at ``STABILITY_MARGIN``
+times the bound ``c gamma / (2 alpha)`` of its spheres.  The divisions are guarded:
+``phi_A`` below ``OVERLAP_FLOOR eps_c`` counts as "no overlap".
+
+Stopping (3.27)–(3.28): every moving sphere moved at most ``eps_s`` in the last
+iteration and the mean overlap over the links, ``sum o_ij / #S``, is at most ``eps_c``.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsim.core.jit import jit
+
+#: With dynamic parameters, phi_A below OVERLAP_FLOOR x eps_c counts as no overlap at all.
+OVERLAP_FLOOR = 1e-9
+#: The multiplier rate is kept below this fraction of the linear stability bound c gamma / (2 alpha).
+STABILITY_MARGIN = 0.5
+
+
+@dataclass(frozen=True)
+class DahaParameters:
+    """The numerical parameters of DAHA: eq. 4.1 except ``damping`` and ``penalty``
+    (see the module docstring: the printed pair is linearly unstable).
+
+    ``initial_multiplier`` is the constant ``lambda`` of eq. 3.26 (the paper gives no
+    value); ``max_iterations`` bounds one minimisation, beyond which it is reported as
+    not converged.
+    """
+
+    damping: float = 3.0  #: c (c_bar of (3.29) when dynamic); eq. 4.1 has 1.3
+    step: float = 0.15  #: delta, the artificial time step
+    attraction: float = 0.3  #: alpha
+    penalty: float = 10.0  #: gamma; eq. 4.1 has 0.3
+    multiplier_rate: float = 3.0  #: beta_bar of (3.29)
+    overlap_tolerance: float = 1e-2  #: eps_c of (3.28), a length
+    steadiness_tolerance: float = 1e-3  #: eps_s of (3.27), a length
+    initial_multiplier: float = 1.0  #: lambda of (3.26)
+    dynamic: bool = False  #: c and beta from (3.29); False: the constants c_bar, beta_bar of (3.15)-(3.16)
+    max_iterations: int = 100_000
+
+
+@dataclass
+class Outcome:
+    """What one minimisation did."""
+
+    converged: bool
+    iterations: int
+    mean_overlap: float  #: phi_A at the end (3.28)
+    max_step: float  #: largest displacement of the last iteration (3.27)
+    finite: bool
+
+
+class SerialExchange:
+    """The halo interface of the minimiser on one process: every call is a no-op.
+
+    A decomposed run passes an object with the same three methods: ``exchange``
+    refreshes the anchor (halo) rows of a positions array from their owners, ``sum``
+    and ``max`` reduce a float over all parts of the problem.
+    """
+
+    def exchange(self, positions):
+        return None
+
+    def sum(self, value):
+        return value
+
+    def max(self, value):
+        return value
+
+
+@jit
+def _phi(P, R, a, b):
+    """Smooth constraint (3.4): ``(R_a + R_b)^2 - |X_a - X_b|^2``."""
+    s = 0.0
+    for k in range(P.shape[1]):
+        dx = P[a, k] - P[b, k]
+        s += dx * dx
+    contact = R[a] + R[b]
+    return contact * contact - s
+
+
+@jit
+def _drift(P, U, n_moving, h):
+    for i in range(n_moving):
+        for k in range(P.shape[1]):
+            P[i, k] += h * U[i, k]
+
+
+@jit
+def _kick_damp_drift(P, U, R, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, lam,
+                     sphere_overlap, mean_overlap, delta, alpha, gamma, c_bar, range_sq, out, damping_of):
+    """Forces at the half step, eqs. (3.21)–(3.23); new positions of moving spheres go to ``out``."""
+    n_moving, d = out.shape
+    force = np.empty(d)
+    for i in range(n_moving):
+        for k in range(d):
+            force[k] = 0.0
+        for e in range(link_ptr[i], link_ptr[i + 1]):  # attraction -alpha grad W (3.5 / 3.30)
+            j = link_to[e]
+            s = 0.0
+            for k in range(d):
+                dx = P[i, k] - P[j, k]
+                s += dx * dx
+            if s <= range_sq:
+                for k in range(d):
+                    force[k] -= alpha * (P[i, k] - P[j, k])
+        for e in range(pair_ptr[i], pair_ptr[i + 1]):  # constraints, grad_i phi = -2 (X_i - X_j)
+            p = pair_of[e]
+            if lam[p] == 0.0:
+                continue
+            j = pair_b[p] if pair_a[p] == i else pair_a[p]
+            coefficient = 2.0 * lam[p] * (alpha + gamma * _phi(P, R, i, j))
+            for k in range(d):
+                force[k] += coefficient * (P[i, k] - P[j, k])
+        speed = 0.0
+        for k in range(d):
+            U[i, k] += delta * force[k]
+            speed += U[i, k] * U[i, k]
+        if mean_overlap > 0.0:
+            c = c_bar * (1.0 + abs(delta * math.sqrt(speed) - sphere_overlap[i]) / mean_overlap)
+        else:
+            c = c_bar
+        damping_of[i] = c
+        damping = min(delta * c, 1.0)
+        for k in range(d):
+            U[i, k] *= 1.0 - damping
+            out[i, k] = P[i, k] + 0.5 * delta * U[i, k]
+
+
+@jit
+def _measure(P, previous, R, link_ptr, pair_ptr, pair_of, pair_a, pair_b, sphere_overlap):
+    """Overlap sum over pairs (3.28), mean overlap per moving sphere, largest step (3.27)."""
+    n_moving = previous.shape[0]
+    total = 0.0
+    overlapping = 0
+    for p in range(pair_a.shape[0]):
+        phi = _phi(P, R, pair_a[p], pair_b[p])
+        if phi > 0.0:
+            total += math.sqrt(phi)
+            overlapping += 1
+    for i in range(n_moving):
+        s = 0.0
+        for e in range(pair_ptr[i], pair_ptr[i + 1]):
+            p = pair_of[e]
+            phi = _phi(P, R, pair_a[p], pair_b[p])
+            if phi > 0.0:
+                s += math.sqrt(phi)
+        degree = link_ptr[i + 1] - link_ptr[i]
+        sphere_overlap[i] = s / max(degree, 1)
+    return total, overlapping, _largest_step(P, previous)
+
+
+@jit
+def _largest_step(P, previous):
+    largest = 0.0
+    for i in range(previous.shape[0]):
+        s = 0.0
+        for k in range(P.shape[1]):
+            dx = P[i, k] - previous[i, k]
+            s += dx * dx
+        largest = max(largest, s)
+    return math.sqrt(largest)
+
+
+@jit
+def _update_multipliers(P, R, pair_a, pair_b, lam, rate, damping_of, stable):
+    """Eq. 3.24 (3.31 in the almost-rigid form: the pairs are the tile's)."""
+    n_moving = damping_of.shape[0]
+    for p in range(pair_a.shape[0]):
+        c = damping_of[pair_a[p]]
+        if pair_b[p] < n_moving:
+            c = min(c, damping_of[pair_b[p]])
+        value = lam[p] + min(rate, stable * c) * _phi(P, R, pair_a[p], pair_b[p])
+        lam[p] = value if value > 0.0 else 0.0
+
+
+@jit
+def _initial_multipliers(P, R, pair_a, pair_b, initial):
+    """Eq. 3.26: ``lambda_ij = lambda max(0, phi_ij)``."""
+    lam = np.zeros(pair_a.shape[0])
+    for p in range(pair_a.shape[0]):
+        phi = _phi(P, R, pair_a[p], pair_b[p])
+        if phi > 0.0:
+            lam[p] = initial * phi
+    return lam
+
+
+def attraction_energy(problem, range_=math.inf):
+    """``W`` of eq. 3.5 (3.30 with ``range_ = Delta_W``) over the problem's links."""
+    P = problem.positions
+    energy = 0.0
+    for i in range(problem.n_moving):
+        for e in range(problem.link_ptr[i], problem.link_ptr[i + 1]):
+            j = problem.link_to[e]
+            distance_sq = float(np.sum((P[i] - P[j]) ** 2))
+            if distance_sq <= range_**2:
+                # a link between two moving spheres is listed at both ends
+                energy += 0.5 * distance_sq * (0.5 if j < problem.n_moving else 1.0)
+    return energy
+
+
+def minimise(problem, params, attraction_range=math.inf, exchange=None, on_iteration=None):
+    """Run DAHA on ``problem`` until (3.27) and (3.28) hold or ``max_iterations``.
+
+    ``attraction_range`` is ``Delta_W`` of eq. 3.30 (``inf``: eq. 3.5).  ``exchange``
+    is the halo interface (:class:`SerialExchange` by default).  ``on_iteration(r,
+    problem)``, if given, is called after every iteration (a test hook).  Moving
+    positions are updated in ``problem.positions``.  Stops early, with
+    ``finite=False``, as soon as a position becomes non-finite.
+    """
+    exchange = exchange or SerialExchange()
+    P, R = problem.positions, problem.radii
+    built_at = P[:problem.n_moving].copy()
+    n_moving, d = problem.n_moving, P.shape[1]
+    delta = params.step
+    floor = OVERLAP_FLOOR * params.overlap_tolerance
+    U = np.zeros((n_moving, d))
+    lam = _initial_multipliers(P, R, problem.pair_a, problem.pair_b, params.initial_multiplier)
+    sphere_overlap = np.zeros(n_moving)
+    previous = P[:n_moving].copy()
+    total, overlapping, _ = _measure(P, previous, R, problem.link_ptr, problem.pair_ptr, problem.pair_of,
+                                     problem.pair_a, problem.pair_b, sphere_overlap)
+    n_links = exchange.sum(float(problem.n_links))
+    n_spheres = exchange.sum(float(n_moving))
+    total = exchange.sum(total)
+    mean_overlap = total / max(n_links, 1.0)
+    typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
+    range_sq = attraction_range**2 if math.isfinite(attraction_range) else math.inf
+    new = np.empty((n_moving, d))
+    damping_of = np.full(n_moving, params.damping)
+    stable = delta * STABILITY_MARGIN * params.penalty / (2.0 * params.attraction)
+    largest = math.inf
+    iteration = 0
+    while iteration < params.max_iterations:
+        guarded = max(typical_overlap, floor) if params.dynamic else 0.0
+        if _largest_step(P, built_at) > 0.5 * problem.reach:  # a pair may have come within reach
+            lam = problem.refresh_pairs(lam)
+            built_at[:] = P[:n_moving]
+        previous[:] = P[:n_moving]
+        _drift(P, U, n_moving, 0.5 * delta)
+        exchange.exchange(P)
+        _kick_damp_drift(P, U, R, problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of,
+                         problem.pair_a, problem.pair_b, lam, sphere_overlap, guarded, delta,
+                         params.attraction, params.penalty, params.damping, range_sq, new, damping_of)
+        P[:n_moving] = new
+        exchange.exchange(P)
+        rate = delta * params.multiplier_rate * (math.sqrt(n_spheres) / guarded if params.dynamic else 1.0)
+        _update_multipliers(P, R, problem.pair_a, problem.pair_b, lam, rate, damping_of, stable)
+        total, overlapping, largest = _measure(P, previous, R, problem.link_ptr, problem.pair_ptr,
+                                               problem.pair_of, problem.pair_a, problem.pair_b, sphere_overlap)
+        total = exchange.sum(total)
+        mean_overlap = total / max(n_links, 1.0)
+        typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
+        largest = exchange.max(largest)
+        iteration += 1
+        if on_iteration is not None:
+            on_iteration(iteration, problem)
+        if not (math.isfinite(largest) and math.isfinite(mean_overlap)):
+            return Outcome(False, iteration, mean_overlap, largest, False)
+        if largest <= params.steadiness_tolerance and mean_overlap <= params.overlap_tolerance:
+            return Outcome(True, iteration, mean_overlap, largest, True)
+    return Outcome(False, iteration, mean_overlap, largest, True)

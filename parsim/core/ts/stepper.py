@@ -1,0 +1,211 @@
+"""One time-stepping aggregation run, section 3 of Degond et al. 2024.
+
+Each time step:
+
+1. free advection ``X += dt V``; a cluster with a sphere outside the box is reflected
+   as a whole (item ii);
+2. spheres of different clusters in contact are linked (``S^{n,0}``); DAHA moves the
+   spheres of the interacting clusters to a nearby non-overlapping configuration
+   (3.1); contacts made by that motion are linked too (3.2) and the minimisation is
+   repeated until no new link appears (step 2e);
+3. clusters are relabelled from the links and move with the mass-weighted velocity
+   of their spheres (step 3, eq. 2.9).
+
+Time step.  ``dt(0) = factor L / max_i |V_i|`` (Table 1).  It grows linearly with the
+fraction of merges done, ``dt = dt(0) (1 + (N - M) / (N - 1))`` with ``M`` clusters,
+from ``dt(0)`` at the start to ``2 dt(0)`` when a single cluster remains.
+
+Formulations.  ``"non_rigid"`` (section 3.1): every sphere of the interacting clusters
+moves and every link attracts (eq. 3.5).  ``"almost_rigid"`` (section 3.3): only the
+interacting spheres in the tiles holding a new link move, those in the surrounding
+tiles are read as fixed anchors, and a link attracts only while its length is at most
+``Delta_W`` (eq. 3.30, 3.31); see :mod:`parsim.core.ts.tiles`.
+"""
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from parsim.core.celllist import grid_size
+from parsim.core.ts.clusters import involved_spheres, mass_weighted_velocities, merge_clusters, reflect_at_walls
+from parsim.core.ts.contacts import cross_cluster_contacts, unlinked_contacts
+from parsim.core.ts.daha import DahaParameters, minimise
+from parsim.core.ts.links import LinkSet
+from parsim.core.ts.problem import build_problem
+from parsim.core.ts.tiles import select_spheres, tiles_per_side
+
+FORMULATIONS = ("almost_rigid", "non_rigid")
+STOP_REASONS = ("single_cluster", "max_time", "max_steps")
+#: Factors of Table 1: dt(0) = factor L / max|V|.
+TABLE1_TIME_STEP_FACTORS = (0.005, 0.01, 0.015)
+#: Gap (in mean radii) below which two interacting spheres get a constraint multiplier.
+CANDIDATE_REACH = 1.0
+#: Rounds of steps 2c-2d in one time step before it is reported as not settling.
+MAX_LINK_ROUNDS = 1000
+
+
+class MinimiserFailure(RuntimeError):
+    """DAHA did not converge, or produced a non-finite position; the message says where."""
+
+
+@dataclass
+class TSResult:
+    positions: np.ndarray
+    velocities: np.ndarray
+    cluster: np.ndarray  #: compact cluster label of each sphere
+    links: np.ndarray  #: (m, 2) linked pairs i < j, in the order made
+    link_steps: np.ndarray  #: time step that made each link (1-based)
+    time: float
+    n_steps: int
+    n_collisions: int  #: cluster merges, N - M
+    n_wall_reflections: int
+    n_minimisations: int  #: DAHA runs (rounds of step 2c)
+    n_iterations: int  #: DAHA iterations summed over all runs
+    max_iterations: int  #: most iterations of one DAHA run
+    stop_reason: str
+    cluster_history: np.ndarray = field(repr=False)  #: M after each time step
+    time_history: np.ndarray = field(repr=False)  #: t after each time step
+
+
+def check_formulation(formulation):
+    if formulation not in FORMULATIONS:
+        raise ValueError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
+
+
+class _Run:
+    """The state of one run and the three steps of section 3."""
+
+    def __init__(self, X, V, R, m, L, formulation, daha, attraction_range, tiles, exchange):
+        self.X, self.V, self.R, self.m, self.L = X, V, R, m, L
+        n, d = X.shape
+        self.n, self.d = n, d
+        self.cluster = np.arange(n, dtype=np.int64)
+        self.n_clusters = n
+        self.links = LinkSet(n)
+        self.formulation = formulation
+        self.daha = daha
+        self.attraction_range = attraction_range if formulation == "almost_rigid" else math.inf
+        self.tiles = tiles
+        self.exchange = exchange
+        self.reach = CANDIDATE_REACH * float(R.mean())
+        contact = 2.0 * float(R.max())
+        self.grid_k, self.grid_side = grid_size(L, contact, d, n)
+        self.min_tile = max(contact + self.reach, attraction_range if math.isfinite(attraction_range) else 0.0)
+        self.local_of = np.full(n, -1, dtype=np.int64)
+        self.n_minimisations = 0
+        self.n_iterations = 0
+        self.max_iterations = 0
+
+    def interact(self, step, time):
+        """Step 2: link, minimise, link what the minimisation made touch, until nothing new."""
+        new = cross_cluster_contacts(self.X, self.R, self.cluster, self.grid_side, self.grid_k)
+        if new.shape[0] == 0:
+            return
+        made = [new]
+        self.links.add(new[:, 0], new[:, 1], step)
+        for _ in range(MAX_LINK_ROUNDS):
+            made_so_far = np.concatenate(made)
+            moving = self._minimise(made_so_far, step, time)
+            fresh = unlinked_contacts(self.X, self.R, moving, self.grid_side, self.grid_k,
+                                      self.links.head, self.links.next, self.links.to)
+            if fresh.shape[0] == 0 or self.links.add(fresh[:, 0], fresh[:, 1], step) == 0:
+                break
+            made.append(fresh)
+        else:
+            raise MinimiserFailure(f"time step {step} (t = {time:.6g}): the link set still changed after "
+                                   f"{MAX_LINK_ROUNDS} rounds of minimisation (step 2e)")
+        labels, m = merge_clusters(self.cluster, self.n_clusters, np.concatenate(made))
+        mass_weighted_velocities(self.V, self.m, labels, m)  # step 3, eq. 2.9
+        self.cluster, self.n_clusters = labels, m
+
+    def _minimise(self, made, step, time):
+        involved = involved_spheres(self.cluster, self.n_clusters, made)
+        if self.formulation == "almost_rigid":
+            k = self.tiles or tiles_per_side(int(involved.sum()), self.d, self.L, self.min_tile)
+        else:
+            k = 1
+        seeds = np.unique(made.reshape(-1))
+        moving, anchors = select_spheres(self.X, involved, seeds, self.L, k)
+        problem = build_problem(self.X, self.R, moving, anchors, self.links, self.reach, self.local_of)
+        outcome = minimise(problem, self.daha, self.attraction_range, self.exchange)
+        self.n_minimisations += 1
+        self.n_iterations += outcome.iterations
+        self.max_iterations = max(self.max_iterations, outcome.iterations)
+        where = (f"time step {step} (t = {time:.6g}), {problem.n_moving} moving spheres, "
+                 f"{problem.n_links} links, {problem.pair_a.size} candidate pairs")
+        if not outcome.finite:
+            raise MinimiserFailure(f"DAHA produced a non-finite position at iteration {outcome.iterations}, {where}")
+        if not outcome.converged:
+            raise MinimiserFailure(
+                f"DAHA did not converge in {outcome.iterations} iterations, {where}: mean overlap "
+                f"{outcome.mean_overlap:.3g} (eps_c {self.daha.overlap_tolerance:g}), last step "
+                f"{outcome.max_step:.3g} (eps_s {self.daha.steadiness_tolerance:g})")
+        self.X[moving] = problem.positions[: problem.n_moving]
+        return moving
+
+
+def simulate_ts(positions, velocities, radii, masses, box_length, time_step_factor=0.005,
+                formulation="almost_rigid", daha=None, attraction_range=None, max_time=math.inf,
+                max_steps=None, tiles=None, exchange=None):
+    """Run time-stepping ballistic aggregation in the box ``[0, box_length]^d``.
+
+    Parameters
+    ----------
+    positions, velocities, radii, masses : as for :func:`parsim.core.aggregation_ed.simulate_ed`.
+    time_step_factor : float > 0
+        ``dt(0) = factor L / max|V|`` (Table 1: 0.005, 0.01, 0.015).
+    formulation : "almost_rigid" (section 3.3) or "non_rigid" (section 3.1).
+    daha : DahaParameters, default eq. 4.1.
+    attraction_range : float, ``Delta_W`` of eq. 3.30 (almost-rigid only); default 4 max R.
+    max_time, max_steps : stop there if several clusters remain.
+    tiles : int or None
+        Tiles per side (almost-rigid); ``None`` follows the law of :mod:`parsim.core.ts.tiles`.
+    exchange : the minimiser's halo interface; default :class:`parsim.core.ts.daha.SerialExchange`.
+
+    Raises
+    ------
+    MinimiserFailure
+        A minimisation did not converge or went non-finite; the message gives the time step.
+    """
+    check_formulation(formulation)
+    X = np.array(positions, dtype=np.float64, copy=True)
+    V = np.array(velocities, dtype=np.float64, copy=True)
+    R = np.ascontiguousarray(radii, dtype=np.float64)
+    m = np.ascontiguousarray(masses, dtype=np.float64)
+    n = X.shape[0]
+    L = float(box_length)
+    daha = daha or DahaParameters()
+    if attraction_range is None:
+        attraction_range = 4.0 * float(R.max())
+    max_steps = np.iinfo(np.int64).max if max_steps is None else int(max_steps)
+    speed = float(np.sqrt((V**2).sum(axis=1)).max())
+    if not speed > 0.0:
+        raise ValueError("velocities must not all be zero (dt(0) = factor L / max|V|)")
+    dt0 = time_step_factor * L / speed
+    run = _Run(X, V, R, m, L, formulation, daha, attraction_range, tiles, exchange)
+    t = 0.0
+    step = 0
+    n_wall = 0
+    clusters, times = [], []
+    reason = "single_cluster"
+    while run.n_clusters > 1:
+        if t >= max_time:
+            reason = "max_time"
+            break
+        if step >= max_steps:
+            reason = "max_steps"
+            break
+        dt = min(dt0 * (1.0 + (n - run.n_clusters) / (n - 1)), max_time - t)
+        step += 1
+        X += dt * V  # step 1, free advection
+        t += dt
+        n_wall += reflect_at_walls(X, V, R, run.cluster, run.n_clusters, L)
+        run.interact(step, t)
+        clusters.append(run.n_clusters)
+        times.append(t)
+    return TSResult(positions=X, velocities=V, cluster=run.cluster, links=run.links.pairs(),
+                    link_steps=run.links.steps(), time=t, n_steps=step, n_collisions=n - run.n_clusters,
+                    n_wall_reflections=n_wall, n_minimisations=run.n_minimisations,
+                    n_iterations=run.n_iterations, max_iterations=run.max_iterations, stop_reason=reason,
+                    cluster_history=np.array(clusters, dtype=np.int64), time_history=np.array(times))
