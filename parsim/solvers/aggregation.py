@@ -3,10 +3,13 @@
 One task: N spheres on a lattice filling the box [0, L]^d with random velocities
 (section 4.1, or the supplementary's variant), aggregated until one cluster
 remains (section 2), then the shape statistics of section 4.2 measured on the
-final configuration.  ``method = "ed"`` is the exact event-driven method.
+final configuration.  ``method = "ed"`` is the exact event-driven method,
+``method = "ts"`` the time-stepping method with the DAHA minimiser (section 3);
+``method`` does not enter the seed, so both start from the same initial condition.
 """
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -14,6 +17,7 @@ from parsim.core.aggregation_ed import simulate_ed
 from parsim.core.initial import (box_length_for_volume_fraction, isotropic_velocities, lattice_positions,
                                  lattice_sites_per_side, lattice_spacing, uniform_cube_velocities)
 from parsim.core.statistics import cluster_statistics, pair_distribution_grid
+from parsim.core.ts import FORMULATIONS, DahaParameters, MinimiserFailure, simulate_ts
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import REQUIRED, Parameter
 from parsim.solver import LENGTH_UNITS, TIME_UNITS, Configuration, Coordinate, Solver, Statistic, TaskResult
@@ -21,10 +25,18 @@ from parsim.solver import LENGTH_UNITS, TIME_UNITS, Configuration, Coordinate, S
 PAPER_INITIAL_CONDITION = "lattice_isotropic"  # section 4.1: lattice filling the box, eq. 4.3 velocities
 SUPPLEMENTARY_INITIAL_CONDITION = "unit_lattice_uniform"  # supplementary A: spacing 1, V uniform in [-1/2, 1/2]^d
 STOP_REASONS = ("single_cluster", "max_time", "max_events")
+_DAHA = DahaParameters()
+
+
+def _ts(name, type_, default, units, description, **limits):
+    """A parameter read by the time-stepping method only (never part of the seed)."""
+    return Parameter(name, type_, default, units, f"(ts only) {description}", affects_seed=False, **limits)
+
 
 PARAMETERS = (
-    Parameter("method", str, "ed", "1", "aggregation method: 'ed' event-driven (exact)",
-              choices=("ed",), affects_seed=False),
+    Parameter("method", str, "ed", "1", "aggregation method: 'ed' event-driven (exact), "
+              "'ts' time stepping with the DAHA minimiser (section 3)",
+              choices=("ed", "ts"), affects_seed=False),
     Parameter("dimension", int, 2, "1", "space dimension d", choices=(2, 3), sweepable=False),
     Parameter("n_spheres", int, REQUIRED, "1", "number of spheres N", low=2),
     Parameter("volume_fraction", float, None, "1",
@@ -42,13 +54,37 @@ PARAMETERS = (
               low=0.0, low_inclusive=False),
     Parameter("max_time", float, math.inf, TIME_UNITS, "stop at this time if several clusters remain",
               low=0.0, low_inclusive=False),
-    Parameter("max_events", int, 10**10, "1", "stop after this many events if several clusters remain", low=1),
+    Parameter("max_events", int, 10**10, "1",
+              "stop after this many events (ed) or time steps (ts) if several clusters remain", low=1),
     Parameter("contact_factor", float, 2.1, "1", "alpha_R of eq. 4.6: centres closer than alpha_R R are in contact",
               low=2.0),
     Parameter("pair_distribution_points", int, 72, "1", "number of r values of P(r) on 2R < r <= 20R (eq. 4.7)",
               low=2, sweepable=False),
     Parameter("box_levels", int, 12, "1", "box-counting levels m = 1..box_levels, eps_m = L / 2^m (eq. 4.8)",
               low=2, high=30, sweepable=False),
+    _ts("time_step_factor", float, 0.005, "1", "dt(0) = factor L / max|V| (Table 1: 0.005, 0.01, 0.015); "
+        "dt grows linearly with the merges done to 2 dt(0) at one cluster", low=0.0, low_inclusive=False),
+    _ts("formulation", str, "almost_rigid", "1", "'almost_rigid' (section 3.3: tiles, local attraction) or "
+        "'non_rigid' (section 3.1: whole interacting clusters move)", choices=FORMULATIONS),
+    _ts("attraction_range", float, 4.0, "1", "Delta_W of eq. 3.30 in units of R (almost_rigid)",
+        low=2.0),
+    _ts("daha_damping", float, _DAHA.damping, "1", "DAHA damping c (c_bar of eq. 3.29 if daha_dynamic); "
+        "eq. 4.1 has 1.3, which with daha_penalty 0.3 is unstable", low=0.0, low_inclusive=False),
+    _ts("daha_step", float, _DAHA.step, "1", "DAHA artificial time step delta (eq. 4.1)", low=0.0,
+        low_inclusive=False),
+    _ts("daha_attraction", float, _DAHA.attraction, "1", "DAHA alpha (eq. 4.1)", low=0.0, low_inclusive=False),
+    _ts("daha_penalty", float, _DAHA.penalty, "1", "DAHA gamma; eq. 4.1 has 0.3", low=0.0),
+    _ts("daha_multiplier_rate", float, _DAHA.multiplier_rate, "1", "DAHA beta (beta_bar of eq. 3.29 if "
+        "daha_dynamic; eq. 4.1)", low=0.0, low_inclusive=False),
+    _ts("daha_dynamic", bool, _DAHA.dynamic, "1", "damping and multiplier rate from eq. 3.29 (with a "
+        "stability cap) instead of constants"),
+    _ts("daha_overlap_tolerance", float, _DAHA.overlap_tolerance, LENGTH_UNITS, "eps_c of eq. 3.28 (eq. 4.1)",
+        low=0.0, low_inclusive=False),
+    _ts("daha_steadiness_tolerance", float, _DAHA.steadiness_tolerance, LENGTH_UNITS,
+        "eps_s of eq. 3.27 (eq. 4.1)", low=0.0, low_inclusive=False),
+    _ts("daha_initial_multiplier", float, _DAHA.initial_multiplier, "1", "lambda of eq. 3.26", low=0.0),
+    _ts("daha_max_iterations", int, _DAHA.max_iterations, "1", "DAHA iterations before a minimisation is "
+        "reported as not converged", low=1),
 )
 
 STATISTICS = (
@@ -65,9 +101,11 @@ STATISTICS = (
     Statistic("radius_of_gyration", LENGTH_UNITS, "radius of gyration of the final configuration"),
     Statistic("final_time", TIME_UNITS, "simulated time reached"),
     Statistic("n_clusters", "1", "number of clusters at the end", dtype="int64"),
-    Statistic("n_events", "1", "number of events processed", dtype="int64"),
+    Statistic("n_events", "1", "number of events processed (ed) or time steps (ts)", dtype="int64"),
     Statistic("n_collisions", "1", "number of cluster merges", dtype="int64"),
     Statistic("n_wall_reflections", "1", "number of cluster reflections at the box walls", dtype="int64"),
+    Statistic("n_minimisations", "1", "DAHA minimisations run (ts; 0 for ed)", dtype="int64"),
+    Statistic("n_minimiser_iterations", "1", "DAHA iterations summed over the run (ts; 0 for ed)", dtype="int64"),
     Statistic("stop_reason", "1", "why the run stopped", dtype="int8",
               attrs={"flag_values": np.arange(len(STOP_REASONS), dtype=np.int8),
                      "flag_meanings": " ".join(STOP_REASONS)}),
@@ -113,6 +151,48 @@ def cost(params: dict) -> float:
     return float(params["n_spheres"]) ** 1.3
 
 
+@dataclass
+class _Run:
+    """What either method returns, in the solver's terms."""
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    cluster: np.ndarray
+    links: np.ndarray
+    time: float
+    n_events: int
+    n_collisions: int
+    n_wall_reflections: int
+    n_minimisations: int
+    n_minimiser_iterations: int
+    stop_reason: str
+
+
+def daha_parameters(params: dict) -> DahaParameters:
+    return DahaParameters(
+        damping=params["daha_damping"], step=params["daha_step"], attraction=params["daha_attraction"],
+        penalty=params["daha_penalty"], multiplier_rate=params["daha_multiplier_rate"],
+        overlap_tolerance=params["daha_overlap_tolerance"],
+        steadiness_tolerance=params["daha_steadiness_tolerance"],
+        initial_multiplier=params["daha_initial_multiplier"], dynamic=params["daha_dynamic"],
+        max_iterations=params["daha_max_iterations"])
+
+
+def _run_ts(params, positions, velocities, radii, masses, length) -> _Run:
+    try:
+        result = simulate_ts(positions, velocities, radii, masses, length,
+                             time_step_factor=params["time_step_factor"], formulation=params["formulation"],
+                             daha=daha_parameters(params),
+                             attraction_range=params["attraction_range"] * params["radius"],
+                             max_time=params["max_time"], max_steps=params["max_events"])
+    except MinimiserFailure as failure:
+        raise NumericalError(f"time stepping: {failure}") from None
+    reason = "max_events" if result.stop_reason == "max_steps" else result.stop_reason
+    return _Run(result.positions, result.velocities, result.cluster, result.links, result.time, result.n_steps,
+                result.n_collisions, result.n_wall_reflections, result.n_minimisations, result.n_iterations,
+                reason)
+
+
 def solve(params: dict, rng: np.random.Generator) -> TaskResult:
     n, d, radius = params["n_spheres"], params["dimension"], params["radius"]
     length = box_length(params)
@@ -124,13 +204,18 @@ def solve(params: dict, rng: np.random.Generator) -> TaskResult:
     radii = np.full(n, radius)
     masses = np.full(n, params["mass"])
 
-    result = simulate_ed(positions, velocities, radii, masses, length,
-                         max_time=params["max_time"], max_events=params["max_events"])
-    if not (np.all(np.isfinite(result.positions)) and np.all(np.isfinite(result.velocities))):
-        raise NumericalError(f"non-finite positions or velocities after {result.n_events} events")
+    if params["method"] == "ts":
+        run = _run_ts(params, positions, velocities, radii, masses, length)
+    else:
+        result = simulate_ed(positions, velocities, radii, masses, length,
+                             max_time=params["max_time"], max_events=params["max_events"])
+        run = _Run(result.positions, result.velocities, result.cluster, result.links, result.time,
+                   result.n_events, result.n_collisions, result.n_wall_reflections, 0, 0, result.stop_reason)
+    if not (np.all(np.isfinite(run.positions)) and np.all(np.isfinite(run.velocities))):
+        raise NumericalError(f"non-finite positions or velocities after {run.n_events} events")
 
     lower, upper = np.zeros(d), np.full(d, length)
-    shape = cluster_statistics(result.positions, radii, lower, upper,
+    shape = cluster_statistics(run.positions, radii, lower, upper,
                                contact_factor=params["contact_factor"],
                                r_values=pair_distribution_grid(radius, params["pair_distribution_points"]),
                                box_levels=params["box_levels"])
@@ -139,16 +224,18 @@ def solve(params: dict, rng: np.random.Generator) -> TaskResult:
         **{name: shape[name] for name in ("aspect_ratio", "orientation", "contact_number", "pair_distribution",
                                           "box_count", "fractal_dimension", "fractal_prefactor",
                                           "radius_of_gyration")},
-        "final_time": result.time,
-        "n_clusters": int(result.cluster.max()) + 1,
-        "n_events": result.n_events,
-        "n_collisions": result.n_collisions,
-        "n_wall_reflections": result.n_wall_reflections,
-        "stop_reason": STOP_REASONS.index(result.stop_reason),
+        "final_time": run.time,
+        "n_clusters": int(run.cluster.max()) + 1,
+        "n_events": run.n_events,
+        "n_collisions": run.n_collisions,
+        "n_wall_reflections": run.n_wall_reflections,
+        "n_minimisations": run.n_minimisations,
+        "n_minimiser_iterations": run.n_minimiser_iterations,
+        "stop_reason": STOP_REASONS.index(run.stop_reason),
     }
     configuration = Configuration(
-        arrays={"spheres/position": result.positions, "spheres/radius": radii, "spheres/mass": masses,
-                "spheres/velocity": result.velocities, "spheres/cluster": result.cluster, "links": result.links},
+        arrays={"spheres/position": run.positions, "spheres/radius": radii, "spheres/mass": masses,
+                "spheres/velocity": run.velocities, "spheres/cluster": run.cluster, "links": run.links},
         box_lower=lower, box_upper=upper, periodic=np.zeros(d, dtype=bool))
     return TaskResult(statistics, configuration)
 

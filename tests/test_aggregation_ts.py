@@ -1,0 +1,179 @@
+"""Tests of the time-stepping aggregation with the DAHA minimiser (parsim.core.ts)."""
+
+import math
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
+from parsim.core.ts import DahaParameters, simulate_ts
+from parsim.core.ts.daha import attraction_energy, minimise
+from parsim.core.ts.links import LinkSet
+from parsim.core.ts.problem import build_problem
+from tests.datasets import reproducible_part, run_serial
+from tests.mpi import parsim_command, run_mpi
+
+R = 0.2
+PARAMS = DahaParameters()
+#: A pair "in contact" after DAHA: its overlap measure sqrt(phi) is of order eps_c, so the
+#: gap is of order eps_c^2 / (4R); a few times that bounds any single pair.
+CONTACT_GAP = 10 * PARAMS.overlap_tolerance**2 / (4 * R)
+
+
+def all_gaps(x, radii):
+    diff = x[:, None, :] - x[None, :, :]
+    distance = np.sqrt((diff**2).sum(axis=2))
+    iu = np.triu_indices(len(x), 1)
+    return (distance - (radii[:, None] + radii[None, :]))[iu]
+
+
+def problem_of(x, links_ij, moving=None):
+    """All spheres moving (unless ``moving`` is given, then the others are anchors)."""
+    n = len(x)
+    radii = np.full(n, R)
+    links = LinkSet(n)
+    if len(links_ij):
+        links_ij = np.asarray(links_ij)
+        links.add(links_ij[:, 0], links_ij[:, 1], 1)
+    moving = np.arange(n) if moving is None else np.asarray(moving)
+    anchors = np.setdiff1d(np.arange(n), moving)
+    return build_problem(np.asarray(x, float), radii, moving, anchors, links, R, np.full(n, -1)), radii
+
+
+def test_two_overlapping_discs_are_pushed_apart_to_contact():
+    problem, radii = problem_of([[1.0, 1.0], [1.3, 1.05]], [(0, 1)])
+    outcome = minimise(problem, PARAMS)
+    assert outcome.converged and outcome.finite
+    gap = np.linalg.norm(problem.positions[0] - problem.positions[1]) - 2 * R
+    assert abs(gap) < CONTACT_GAP
+    # internal forces only: the centre of mass does not move (equal damping on both discs)
+    assert np.allclose(problem.positions.mean(axis=0), [1.15, 1.025], atol=1e-12)
+
+
+@pytest.mark.parametrize("k", [8, 30, 200])
+def test_a_clump_of_overlapping_discs_converges(k):
+    rng = np.random.default_rng(k)
+    x = 5.0 + rng.uniform(0.0, 0.4 * math.sqrt(k), (k, 2))  # area fraction ~0.8: many overlaps
+    gaps = all_gaps(x, np.full(k, R))
+    i, j = np.triu_indices(k, 1)
+    touching = gaps <= 0
+    assert touching.sum() >= k / 2
+    problem, radii = problem_of(x, np.stack([i[touching], j[touching]], axis=1))
+    outcome = minimise(problem, PARAMS)
+    assert outcome.converged, outcome
+    assert outcome.mean_overlap <= PARAMS.overlap_tolerance  # eq. 3.28
+    assert outcome.max_step <= PARAMS.steadiness_tolerance  # eq. 3.27
+    final = all_gaps(problem.positions, radii)
+    assert final.min() > -0.2 * R  # no disc left deep inside another
+
+
+def test_energy_decreases_while_the_constraints_hold():
+    """A stretched link relaxes to contact: W (3.5) goes down at every iteration while no
+    pair overlaps.  The scheme printed as (3.20)-(3.23) would move the discs apart."""
+    problem, _ = problem_of([[1.0, 1.0], [2.0, 1.2]], [(0, 1)])
+    energies, overlapping = [attraction_energy(problem)], []
+
+    def record(_, p):
+        energies.append(attraction_energy(p))
+        overlapping.append(np.linalg.norm(p.positions[0] - p.positions[1]) < 2 * R)
+
+    outcome = minimise(problem, PARAMS, on_iteration=record)
+    assert outcome.converged
+    first_overlap = overlapping.index(True) if True in overlapping else len(overlapping)
+    assert first_overlap > 5
+    assert np.all(np.diff(energies[: first_overlap + 1]) < 0)
+    assert energies[-1] < 0.2 * energies[0]
+    assert abs(np.linalg.norm(problem.positions[0] - problem.positions[1]) - 2 * R) < CONTACT_GAP
+
+
+def test_anchors_do_not_move():
+    problem, _ = problem_of([[1.0, 1.0], [1.3, 1.0], [0.62, 1.0]], [(0, 1), (0, 2)], moving=[0, 1])
+    anchor = problem.positions[2].copy()
+    assert minimise(problem, PARAMS).converged
+    assert np.array_equal(problem.positions[2], anchor)
+
+
+def paper_system(n, volume_fraction, seed):
+    rng = np.random.default_rng(seed)
+    length = box_length_for_volume_fraction(n, 2, R, volume_fraction)
+    return (lattice_positions(n, 2, length, rng), isotropic_velocities(n, 2, 1.0, rng), np.full(n, R),
+            np.ones(n), length)
+
+
+@pytest.mark.parametrize("formulation", ["almost_rigid", "non_rigid"])
+@pytest.mark.parametrize("volume_fraction", [0.1, 0.3])
+def test_aggregation_ends_in_one_cluster_without_overlap(formulation, volume_fraction):
+    x, v, radii, masses, length = paper_system(150, volume_fraction, seed=4)
+    result = simulate_ts(x, v, radii, masses, length, formulation=formulation)
+    assert result.stop_reason == "single_cluster"
+    assert np.all(result.cluster == 0) and result.n_collisions == 149
+    links = result.links
+    assert len(links) >= 149  # connected: a spanning tree at least
+    assert all_gaps(result.positions, radii).min() > -0.2 * R
+    # links join spheres at contact
+    link_gaps = np.linalg.norm(result.positions[links[:, 0]] - result.positions[links[:, 1]], axis=1) - 2 * R
+    assert np.abs(link_gaps).max() < 0.1 * R
+    # one cluster: one velocity, the total momentum up to the reflections' sign changes
+    assert np.allclose(result.velocities, result.velocities[0], atol=0, rtol=0)
+
+
+def test_merges_conserve_momentum_away_from_walls():
+    """Three discs in a large box collide before reaching a wall: total momentum is exact."""
+    x = np.array([[10.0, 10.0], [11.0, 10.0], [10.5, 11.0]])
+    v = np.array([[1.0, 0.1], [-1.0, 0.0], [0.0, -1.2]])
+    masses = np.array([1.0, 2.0, 3.0])
+    result = simulate_ts(x, v, np.full(3, R), masses, 20.0, time_step_factor=0.001)
+    assert result.stop_reason == "single_cluster" and result.n_wall_reflections == 0
+    before = (masses[:, None] * v).sum(axis=0)
+    after = (masses[:, None] * result.velocities).sum(axis=0)
+    assert np.allclose(after, before, rtol=0, atol=1e-14)
+
+
+def test_almost_rigid_with_one_tile_is_the_non_rigid_method():
+    x, v, radii, masses, length = paper_system(120, 0.2, seed=8)
+    one_tile = simulate_ts(x, v, radii, masses, length, formulation="almost_rigid", tiles=1,
+                           attraction_range=math.inf)
+    non_rigid = simulate_ts(x, v, radii, masses, length, formulation="non_rigid")
+    assert np.array_equal(one_tile.links, non_rigid.links)
+    assert np.array_equal(one_tile.positions, non_rigid.positions)
+
+
+def test_time_step_grows_to_twice_the_initial_one():
+    x, v, radii, masses, length = paper_system(64, 0.3, seed=2)
+    result = simulate_ts(x, v, radii, masses, length, time_step_factor=0.01)
+    dt = np.diff(np.concatenate([[0.0], result.time_history]))
+    dt0 = 0.01 * length / np.abs(np.linalg.norm(v, axis=1)).max()
+    assert dt[0] == pytest.approx(dt0)
+    expected = dt0 * (1 + (64 - np.concatenate([[64], result.cluster_history[:-1]])) / 63)
+    assert np.allclose(dt, expected, rtol=1e-12)
+    assert result.cluster_history[-1] == 1
+
+
+JOB = """
+name = "ts_vs_ed"
+kind = "aggregation"
+seed = 5
+realizations = 2
+[parameters]
+n_spheres = 64
+[sweep]
+method = ["ed", "ts"]
+volume_fraction = [0.1, 0.3]
+"""
+
+
+@pytest.mark.mpi
+def test_ts_job_identical_on_one_and_two_ranks(tmp_path):
+    job = tmp_path / "job.toml"
+    job.write_text(JOB)
+    two = run_mpi(parsim_command("run", str(job), "--output", str(tmp_path / "two"), "--quiet"))
+    assert two.returncode == 0, two.stderr
+    one = run_serial("run", str(job), "--output", str(tmp_path / "one"), "--quiet")
+    assert one.returncode == 0, one.stderr
+    a = reproducible_part(tmp_path / "one" / "ts_vs_ed.nc")
+    b = reproducible_part(tmp_path / "two" / "ts_vs_ed.nc")
+    xr.testing.assert_identical(a, b)
+    assert (a.n_clusters == 1).all()
+    ts, ed = a.sel({"method": "ts"}), a.sel({"method": "ed"})  # not sel(method=...): a keyword of sel
+    assert (ts.n_minimisations > 0).all() and (ed.n_minimisations == 0).all()
