@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from parsim.comparison import markdown, method_comparison
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
 from parsim.core.ts import DahaParameters, simulate_ts
 from parsim.core.ts.daha import attraction_energy, minimise
@@ -177,3 +178,7 @@ def test_ts_job_identical_on_one_and_two_ranks(tmp_path):
     assert (a.n_clusters == 1).all()
     ts, ed = a.sel({"method": "ts"}), a.sel({"method": "ed"})  # not sel(method=...): a keyword of sel
     assert (ts.n_minimisations > 0).all() and (ed.n_minimisations == 0).all()
+    table = markdown(method_comparison(a))
+    assert table.count("\n| 64 |") == 2  # one row per volume fraction
+    for row in method_comparison(a):
+        assert 0.3 < row["N_c ED"] < 0.8 and 0.3 < row["N_c TS"] < 0.8  # near 0.5 (Fig. 7)
