@@ -1,0 +1,121 @@
+"""Benchmark: time-stepping vs event-driven ballistic aggregation to a single cluster, time vs N.
+
+Setup of Degond et al. 2024, Table 1: d = 2, R = 0.2, m = 1, L = sqrt(N pi / V_f) R,
+spheres on the square lattice, isotropic velocities |V| = 1 (eq. 4.3).  The time-stepping
+method (TS, almost-rigid, DAHA defaults) uses dt(0) = 0.005 L / max|V| (Delta t_1 of
+Table 1); the event-driven method (ED) runs on the same initial conditions.  One core
+(numba kernels are serial).  Numba compilation is excluded: a tiny run of each method
+warms the kernels up first.
+
+Prints, per (method, V_f, N), the mean wall and CPU time over the realizations (CPU time
+is the better measure when other processes share the cores), time steps (TS) or events
+(ED), DAHA minimisations and iterations (TS), then the least-squares exponents of wall
+and CPU time vs N over N >= 1000 per (method, V_f), next to the paper's TS exponents.
+Once a run of a (method, V_f) takes longer than --max-seconds, its larger N are skipped.
+
+    python benchmarks/aggregation_ts.py [--sizes 100 400 1600] [--fractions 0.2] [--methods ts ed]
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+if __package__ in (None, ""):  # run as a script from a source tree
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), os.pardir))
+
+from parsim.core.aggregation_ed import simulate_ed  # noqa: E402
+from parsim.core.initial import (  # noqa: E402
+    box_length_for_volume_fraction,
+    isotropic_velocities,
+    lattice_positions,
+)
+from parsim.core.ts import MinimiserFailure, simulate_ts  # noqa: E402
+
+RADIUS = 0.2
+TIME_STEP_FACTOR = 0.005  # Delta t_1 of Table 1
+FIT_MIN_N = 1000
+PAPER_TS_EXPONENTS = {0.1: 1.22, 0.2: 1.25, 0.3: 1.29}  # Degond et al. 2024, TS, d = 2
+
+
+def setup(n, volume_fraction, seed, realization):
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(n, realization)))
+    L = box_length_for_volume_fraction(n, 2, RADIUS, volume_fraction)
+    x = lattice_positions(n, 2, L, rng)
+    v = isotropic_velocities(n, 2, 1.0, rng)
+    return x, v, np.full(n, RADIUS), np.ones(n), L
+
+
+def run(method, n, volume_fraction, seed, realization):
+    """Wall time, CPU time and (steps or events, minimisations, DAHA iterations) of one run."""
+    x, v, r, m, L = setup(n, volume_fraction, seed, realization)
+    start, start_cpu = time.perf_counter(), time.process_time()
+    if method == "ts":
+        res = simulate_ts(x, v, r, m, L, time_step_factor=TIME_STEP_FACTOR)
+        counts = (res.n_steps, res.n_minimisations, res.n_iterations)
+    else:
+        res = simulate_ed(x, v, r, m, L)
+        counts = (res.n_events, 0, 0)
+    wall, cpu = time.perf_counter() - start, time.process_time() - start_cpu
+    if res.stop_reason != "single_cluster":
+        raise RuntimeError(f"{method} N = {n}: stopped with {res.stop_reason}")
+    return wall, cpu, counts
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[100, 400, 1600, 6400, 25600, 102400])
+    parser.add_argument("--fractions", type=float, nargs="+", default=[0.1, 0.2, 0.3])
+    parser.add_argument("--realizations", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--methods", nargs="+", choices=("ts", "ed"), default=["ts", "ed"])
+    parser.add_argument("--max-seconds", type=float, default=600.0,
+                        help="skip larger N for a (method, V_f) once a run took longer (default 600)")
+    args = parser.parse_args(argv)
+
+    for method in args.methods:  # compile / load the numba cache
+        run(method, 16, 0.2, args.seed, 0)
+
+    print(f"ballistic aggregation to one cluster, d = 2, R = {RADIUS}, lattice + isotropic |V| = 1, "
+          f"TS dt(0) = {TIME_STEP_FACTOR} L / max|V|, seed {args.seed}, {args.realizations} realization(s)")
+    header = (f"{'method':>6} {'V_f':>5} {'N':>7} {'wall [s]':>10} {'CPU [s]':>10} {'steps/events':>12} "
+              f"{'minimisations':>13} {'DAHA iters':>11}")
+    print(header)
+    print("-" * len(header))
+    times = {}  # (method, V_f) -> {N: (mean wall time, mean CPU time)}
+    stopped = set()
+    for vf in args.fractions:
+        for n in sorted(args.sizes):
+            for method in args.methods:
+                if (method, vf) in stopped:
+                    continue
+                try:
+                    runs = [run(method, n, vf, args.seed, k) for k in range(args.realizations)]
+                except MinimiserFailure as failure:
+                    print(f"{method:>6} {vf:>5.2f} {n:>7}  MinimiserFailure: {failure}", flush=True)
+                    stopped.add((method, vf))
+                    continue
+                wall, cpu = np.mean([(w, c) for w, c, _ in runs], axis=0)
+                steps, minimisations, iterations = np.mean([counts for _, _, counts in runs], axis=0)
+                print(f"{method:>6} {vf:>5.2f} {n:>7} {wall:>10.3f} {cpu:>10.3f} {steps:>12.0f} "
+                      f"{minimisations:>13.0f} {iterations:>11.0f}", flush=True)
+                times.setdefault((method, vf), {})[n] = (wall, cpu)
+                if max(w for w, _, _ in runs) > args.max_seconds:
+                    stopped.add((method, vf))
+
+    print(f"\nleast-squares exponents of wall and CPU time vs N (N >= {FIT_MIN_N})")
+    for (method, vf), by_n in times.items():
+        big = {n: t for n, t in by_n.items() if n >= FIT_MIN_N}
+        paper = PAPER_TS_EXPONENTS.get(vf)
+        paper = f"{paper:.2f}" if paper is not None else "-"
+        if len(big) >= 2:
+            wall, cpu = np.polyfit(np.log(list(big)), np.log(list(big.values())), 1)[0]
+            print(f"{method:>6} V_f = {vf:.2f}: wall {wall:.2f}, CPU {cpu:.2f}   (paper TS: {paper})")
+        else:
+            print(f"{method:>6} V_f = {vf:.2f}: needs at least two sizes with N >= {FIT_MIN_N}   (paper TS: {paper})")
+
+
+if __name__ == "__main__":
+    main()
