@@ -6,7 +6,7 @@ A pair is *in contact* when ``phi_ij >= 0`` (eq. 3.2), that is ``|X_i - X_j| <= 
 
 import numpy as np
 
-from parsim.core.celllist import block_cells, build_cells, cell_index, grid_size, neighbour_offsets
+from parsim.core.celllist import block_cells, build_cells, grid_size, neighbour_offsets
 from parsim.core.jit import jit
 from parsim.core.ts.links import are_linked
 
@@ -30,93 +30,70 @@ def _distance_sq(X, i, j):
 
 
 @jit
-def cross_cluster_contacts(X, R, cluster, side, k):
-    """Pairs ``i < j`` of spheres of different clusters in contact, shape ``(m, 2)``.
+def _near_pairs(X, R, queries, group, reach, side, k):
+    """Pairs ``(i, j)``, ``i`` in ``queries``, with a gap ``|X_i - X_j| - R_i - R_j <= reach``
+    and ``group[i] != group[j]``; a pair of two queries is reported once, with ``i < j``.
 
-    The grid (``k`` cells per side of length ``side >= 2 max R``) covers the box.
+    The grid (``k`` cells per side of length ``side >= 2 max R + reach``) covers the points.
     """
     n, d = X.shape
     head, nxt, _, cell_of, _ = build_cells(X, side, k)
     offsets = neighbour_offsets(d)
     coords = np.empty(d, dtype=np.int64)
     block = np.empty(offsets.shape[0], dtype=np.int64)
+    is_query = np.zeros(n, dtype=np.bool_)
+    for i in queries:
+        is_query[i] = True
     pairs = np.empty((16, 2), dtype=np.int64)
     count = 0
-    for i in range(n):
+    for i in queries:
         nb = block_cells(cell_of[i], k, offsets, coords, block)
         for b in range(nb):
             j = head[block[b]]
             while j >= 0:
-                if j > i and cluster[j] != cluster[i]:
-                    contact = R[i] + R[j]
-                    if _distance_sq(X, i, j) <= contact * contact:
-                        pairs = _grow(pairs, count)
-                        pairs[count, 0] = i
-                        pairs[count, 1] = j
-                        count += 1
-                j = nxt[j]
-    return pairs[:count].copy()
-
-
-@jit
-def unlinked_contacts(X, R, moved, side, k, link_head, link_next, link_to):
-    """Pairs in contact with at least one sphere in ``moved`` that are not linked (eq. 3.2).
-
-    ``moved`` is a sorted index array; a pair of two moved spheres is reported once.
-    """
-    n, d = X.shape
-    head, nxt, _, _, _ = build_cells(X, side, k)
-    offsets = neighbour_offsets(d)
-    coords = np.empty(d, dtype=np.int64)
-    block = np.empty(offsets.shape[0], dtype=np.int64)
-    is_moved = np.zeros(n, dtype=np.bool_)
-    for i in moved:
-        is_moved[i] = True
-    pairs = np.empty((16, 2), dtype=np.int64)
-    count = 0
-    for i in moved:
-        nb = block_cells(cell_index(X[i], side, k), k, offsets, coords, block)
-        for b in range(nb):
-            j = head[block[b]]
-            while j >= 0:
-                if j != i and not (is_moved[j] and j < i):
-                    contact = R[i] + R[j]
-                    if _distance_sq(X, i, j) <= contact * contact and not are_linked(link_head, link_next, link_to, i, j):
-                        pairs = _grow(pairs, count)
-                        pairs[count, 0] = min(i, j)
-                        pairs[count, 1] = max(i, j)
-                        count += 1
-                j = nxt[j]
-    return pairs[:count].copy()
-
-
-@jit
-def _candidate_pairs(P, R, n_moving, reach, side, k):
-    n, d = P.shape
-    head, nxt, _, cell_of, _ = build_cells(P, side, k)
-    offsets = neighbour_offsets(d)
-    coords = np.empty(d, dtype=np.int64)
-    block = np.empty(offsets.shape[0], dtype=np.int64)
-    pairs = np.empty((16, 2), dtype=np.int64)
-    count = 0
-    for i in range(n_moving):
-        nb = block_cells(cell_of[i], k, offsets, coords, block)
-        for b in range(nb):
-            j = head[block[b]]
-            while j >= 0:
-                if j > i or j >= n_moving:  # anchor pairs are seen from the moving end only
+                if j != i and not (is_query[j] and j < i) and group[j] != group[i]:
                     limit = R[i] + R[j] + reach
-                    if _distance_sq(P, i, j) < limit * limit:
+                    if _distance_sq(X, i, j) <= limit * limit:
                         pairs = _grow(pairs, count)
                         pairs[count, 0] = i
                         pairs[count, 1] = j
                         count += 1
                 j = nxt[j]
     return pairs[:count].copy()
+
+
+def cross_cluster_contacts(X, R, cluster, side, k):
+    """Pairs ``i < j`` of spheres of different clusters in contact, shape ``(m, 2)``.
+
+    The grid (``k`` cells per side of length ``side >= 2 max R``) covers the box.
+    """
+    return _near_pairs(X, R, np.arange(X.shape[0]), cluster, 0.0, side, k)
+
+
+@jit
+def _unlinked_sorted(pairs, link_head, link_next, link_to):
+    """The pairs that are not linked, each written ``(min, max)``."""
+    kept = np.empty_like(pairs)
+    count = 0
+    for p in range(pairs.shape[0]):
+        i, j = pairs[p, 0], pairs[p, 1]
+        if not are_linked(link_head, link_next, link_to, i, j):
+            kept[count, 0] = min(i, j)
+            kept[count, 1] = max(i, j)
+            count += 1
+    return kept[:count].copy()
+
+
+def unlinked_contacts(X, R, moved, side, k, link_head, link_next, link_to):
+    """Pairs ``(min, max)`` in contact with at least one sphere in ``moved`` that are not linked
+    (eq. 3.2); a pair of two moved spheres is reported once."""
+    n = X.shape[0]
+    touching = _near_pairs(X, R, moved, np.arange(n), 0.0, side, k)
+    return _unlinked_sorted(touching, link_head, link_next, link_to)
 
 
 def candidate_pairs(P, R, n_moving, reach):
-    """Local pairs ``a < b`` with a moving end and a gap below ``reach`` (the candidates).
+    """Local pairs ``a < b`` with a moving end and a gap of at most ``reach`` (the candidates).
 
     ``P`` are local positions, the first ``n_moving`` moving; the cell grid covers their
     bounding box only.  Returns ``(pair_a, pair_b)``, sorted by ``(a, b)``.
@@ -129,7 +106,8 @@ def candidate_pairs(P, R, n_moving, reach):
     extent = float(shifted.max()) + 1e-12
     cutoff = 2.0 * float(R.max()) + reach
     k, side = grid_size(max(extent, cutoff), cutoff, P.shape[1], P.shape[0])
-    pairs = _candidate_pairs(shifted, R, n_moving, reach, side, k)
+    # anchors are not queries: anchor pairs are seen from their moving end only
+    pairs = _near_pairs(shifted, R, np.arange(n_moving), np.arange(P.shape[0]), reach, side, k)
     order = np.lexsort((pairs[:, 1], pairs[:, 0]))
     return np.ascontiguousarray(pairs[order, 0]), np.ascontiguousarray(pairs[order, 1])
 

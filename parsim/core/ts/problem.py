@@ -16,7 +16,7 @@ class Problem:
     pairs are stored per moving sphere in CSR form (``*_ptr`` of length
     ``n_moving + 1``); ``pair_a < pair_b`` are local indices, ``pair_of`` lists the
     pairs incident to each moving sphere, ``link_to`` its linked partners.  Candidate
-    pairs are those with a gap below ``reach``; :meth:`refresh_pairs` recomputes them.
+    pairs are those with a gap of at most ``reach``; :meth:`refresh_pairs` recomputes them.
     """
 
     members: np.ndarray
@@ -78,7 +78,7 @@ def _local_links(members, n_moving, local_of, head, nxt, to):
 def build_problem(X, R, moving, anchors, links, reach, local_of):
     """The minimisation of the ``moving`` spheres with ``anchors`` fixed.
 
-    ``reach`` is the gap below which a pair becomes a constraint candidate; ``local_of``
+    ``reach`` is the largest gap of a constraint candidate pair; ``local_of``
     is scratch of length ``n`` filled with -1, returned filled with -1.
     """
     members = np.concatenate([moving, anchors])
