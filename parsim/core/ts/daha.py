@@ -137,7 +137,8 @@ def _drift(P, U, n_moving, h):
 
 @jit
 def _kick_damp_drift(P, U, R, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, lam,
-                     sphere_overlap, mean_overlap, delta, alpha, gamma, c_bar, range_sq, out, damping_of):
+                     sphere_overlap, mean_overlap, dynamic, delta, alpha, gamma, c_bar, range_sq, out,
+                     damping_of):
     """Forces at the half step, eqs. (3.21)–(3.23); new positions of moving spheres go to ``out``."""
     n_moving, d = out.shape
     force = np.empty(d)
@@ -165,7 +166,7 @@ def _kick_damp_drift(P, U, R, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair
         for k in range(d):
             U[i, k] += delta * force[k]
             speed += U[i, k] * U[i, k]
-        if mean_overlap > 0.0:
+        if dynamic:  # eq. 3.29; mean_overlap > 0 (floored)
             c = c_bar * (1.0 + abs(delta * math.sqrt(speed) - sphere_overlap[i]) / mean_overlap)
         else:
             c = c_bar
@@ -177,23 +178,27 @@ def _kick_damp_drift(P, U, R, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair
 
 
 @jit
-def _measure(P, previous, R, link_ptr, pair_ptr, pair_of, pair_a, pair_b, sphere_overlap):
+def _constraint_values(P, R, pair_a, pair_b, phi):
+    """``phi`` of every candidate pair at ``P`` (eq. 3.4)."""
+    for p in range(pair_a.shape[0]):
+        phi[p] = _phi(P, R, pair_a[p], pair_b[p])
+
+
+@jit
+def _measure(phi, P, previous, link_ptr, pair_ptr, pair_of, sphere_overlap):
     """Overlap sum over pairs (3.28), mean overlap per moving sphere, largest step (3.27)."""
-    n_moving = previous.shape[0]
     total = 0.0
     overlapping = 0
-    for p in range(pair_a.shape[0]):
-        phi = _phi(P, R, pair_a[p], pair_b[p])
-        if phi > 0.0:
-            total += math.sqrt(phi)
+    for p in range(phi.shape[0]):
+        if phi[p] > 0.0:
+            total += math.sqrt(phi[p])
             overlapping += 1
-    for i in range(n_moving):
+    for i in range(previous.shape[0]):
         s = 0.0
         for e in range(pair_ptr[i], pair_ptr[i + 1]):
             p = pair_of[e]
-            phi = _phi(P, R, pair_a[p], pair_b[p])
-            if phi > 0.0:
-                s += math.sqrt(phi)
+            if phi[p] > 0.0:
+                s += math.sqrt(phi[p])
         degree = link_ptr[i + 1] - link_ptr[i]
         sphere_overlap[i] = s / max(degree, 1)
     return total, overlapping, _largest_step(P, previous)
@@ -212,14 +217,14 @@ def _largest_step(P, previous):
 
 
 @jit
-def _update_multipliers(P, R, pair_a, pair_b, lam, rate, damping_of, stable):
+def _update_multipliers(phi, pair_a, pair_b, lam, rate, damping_of, stable):
     """Eq. 3.24 (3.31 in the almost-rigid form: the pairs are the tile's)."""
     n_moving = damping_of.shape[0]
     for p in range(pair_a.shape[0]):
         c = damping_of[pair_a[p]]
         if pair_b[p] < n_moving:
             c = min(c, damping_of[pair_b[p]])
-        value = lam[p] + min(rate, stable * c) * _phi(P, R, pair_a[p], pair_b[p])
+        value = lam[p] + min(rate, stable * c) * phi[p]
         lam[p] = value if value > 0.0 else 0.0
 
 
@@ -267,8 +272,10 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     lam = _initial_multipliers(P, R, problem.pair_a, problem.pair_b, params.initial_multiplier)
     sphere_overlap = np.zeros(n_moving)
     previous = P[:n_moving].copy()
-    total, overlapping, _ = _measure(P, previous, R, problem.link_ptr, problem.pair_ptr, problem.pair_of,
-                                     problem.pair_a, problem.pair_b, sphere_overlap)
+    phi = np.empty(problem.pair_a.size)
+    _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
+    total, overlapping, _ = _measure(phi, P, previous, problem.link_ptr, problem.pair_ptr, problem.pair_of,
+                                     sphere_overlap)
     n_links = exchange.sum(float(problem.n_links))
     n_spheres = exchange.sum(float(n_moving))
     total = exchange.sum(total)
@@ -281,22 +288,24 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     largest = math.inf
     iteration = 0
     while iteration < params.max_iterations:
-        guarded = max(typical_overlap, floor) if params.dynamic else 0.0
+        guarded = max(typical_overlap, floor)
         if _largest_step(P, built_at) > 0.5 * problem.reach:  # a pair may have come within reach
             lam = problem.refresh_pairs(lam)
+            phi = np.empty(problem.pair_a.size)
             built_at[:] = P[:n_moving]
         previous[:] = P[:n_moving]
         _drift(P, U, n_moving, 0.5 * delta)
         exchange.exchange(P)
         _kick_damp_drift(P, U, R, problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of,
-                         problem.pair_a, problem.pair_b, lam, sphere_overlap, guarded, delta,
+                         problem.pair_a, problem.pair_b, lam, sphere_overlap, guarded, params.dynamic, delta,
                          params.attraction, params.penalty, params.damping, range_sq, new, damping_of)
         P[:n_moving] = new
         exchange.exchange(P)
         rate = delta * params.multiplier_rate * (math.sqrt(n_spheres) / guarded if params.dynamic else 1.0)
-        _update_multipliers(P, R, problem.pair_a, problem.pair_b, lam, rate, damping_of, stable)
-        total, overlapping, largest = _measure(P, previous, R, problem.link_ptr, problem.pair_ptr,
-                                               problem.pair_of, problem.pair_a, problem.pair_b, sphere_overlap)
+        _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
+        _update_multipliers(phi, problem.pair_a, problem.pair_b, lam, rate, damping_of, stable)
+        total, overlapping, largest = _measure(phi, P, previous, problem.link_ptr, problem.pair_ptr,
+                                               problem.pair_of, sphere_overlap)
         total = exchange.sum(total)
         mean_overlap = total / max(n_links, 1.0)
         typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
