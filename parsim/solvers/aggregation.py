@@ -82,7 +82,12 @@ PARAMETERS = (
         low=0.0, low_inclusive=False),
     _ts("daha_steadiness_tolerance", float, _DAHA.steadiness_tolerance, LENGTH_UNITS,
         "eps_s of eq. 3.27 (eq. 4.1)", low=0.0, low_inclusive=False),
+    _ts("daha_max_overlap_tolerance", float, _DAHA.max_overlap_tolerance, LENGTH_UNITS,
+        "bound on the deepest overlap sqrt(phi_ij) at convergence (ours; the mean of eq. 3.28 alone hides "
+        "single deep overlaps)", low=0.0, low_inclusive=False),
     _ts("daha_initial_multiplier", float, _DAHA.initial_multiplier, "1", "lambda of eq. 3.26", low=0.0),
+    _ts("daha_carry_multipliers", bool, _DAHA.carry_multipliers, "1", "a link starts each minimisation from "
+        "its multiplier at the end of the previous one (false: eq. 3.26 for every pair, 10x slower)"),
     _ts("daha_max_iterations", int, _DAHA.max_iterations, "1", "DAHA iterations before a minimisation is "
         "reported as not converged", low=1),
 )
@@ -174,8 +179,9 @@ def daha_parameters(params: dict) -> DahaParameters:
         penalty=params["daha_penalty"], multiplier_rate=params["daha_multiplier_rate"],
         overlap_tolerance=params["daha_overlap_tolerance"],
         steadiness_tolerance=params["daha_steadiness_tolerance"],
+        max_overlap_tolerance=params["daha_max_overlap_tolerance"],
         initial_multiplier=params["daha_initial_multiplier"], dynamic=params["daha_dynamic"],
-        max_iterations=params["daha_max_iterations"])
+        max_iterations=params["daha_max_iterations"], carry_multipliers=params["daha_carry_multipliers"])
 
 
 def _run_ts(params, positions, velocities, radii, masses, length) -> _Run:

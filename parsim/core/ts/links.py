@@ -1,7 +1,8 @@
 """The set of links (adhesive contacts) of a time-stepping aggregation, ``S`` in section 3.
 
-Links are stored in the order they were made (``first``, ``second``, and the time step
-that made them) and as a per-sphere adjacency list (linked lists in flat arrays), so
+Links are stored in the order they were made (``first``, ``second``, the time step
+that made them and the DAHA multiplier they ended their last minimisation with, NaN
+before the first) and as a per-sphere adjacency list (linked lists in flat arrays), so
 that "are i and j linked" costs the degree of ``i``.  Capacities double as needed.
 """
 
@@ -37,12 +38,18 @@ def _push(head, nxt, to, end, other, slot):
 
 @jit
 def are_linked(head, nxt, to, i, j):
+    return link_index(head, nxt, to, i, j) >= 0
+
+
+@jit
+def link_index(head, nxt, to, i, j):
+    """Index (in order made) of the link ``i``-``j``, or -1 if they are not linked."""
     slot = head[i]
     while slot >= 0:
         if to[slot] == j:
-            return True
+            return slot // 2
         slot = nxt[slot]
-    return False
+    return -1
 
 
 class LinkSet:
@@ -54,6 +61,7 @@ class LinkSet:
         self.first = np.empty(capacity, dtype=np.int64)
         self.second = np.empty(capacity, dtype=np.int64)
         self.made_in = np.empty(capacity, dtype=np.int64)
+        self.multiplier = np.empty(capacity)
         self.head = np.full(n, -1, dtype=np.int64)
         self.next = np.empty(2 * capacity, dtype=np.int64)
         self.to = np.empty(2 * capacity, dtype=np.int64)
@@ -68,12 +76,13 @@ class LinkSet:
         before = self.count
         self.count = int(_append(self.first, self.second, self.made_in, self.head, self.next, self.to,
                                  self.count, i, j, step))
+        self.multiplier[before:self.count] = np.nan
         return self.count - before
 
     def _grow(self, capacity):
-        for name in ("first", "second", "made_in"):
+        for name in ("first", "second", "made_in", "multiplier"):
             old = getattr(self, name)
-            new = np.empty(capacity, dtype=np.int64)
+            new = np.empty(capacity, dtype=old.dtype)
             new[: self.count] = old[: self.count]
             setattr(self, name, new)
         for name in ("next", "to"):

@@ -6,6 +6,7 @@ import numpy as np
 
 from parsim.core.jit import jit
 from parsim.core.ts.contacts import candidate_pairs, incidence
+from parsim.core.ts.links import link_index
 
 
 @dataclass
@@ -45,6 +46,18 @@ class Problem:
             found = old_keys[where] == keys
             kept[found] = multipliers[where[found]]
         return kept
+
+    def pair_links(self, links):
+        """Index in ``links`` of each candidate pair, -1 for a pair that is not linked."""
+        return _pair_links(self.members, self.pair_a, self.pair_b, links.head, links.next, links.to)
+
+
+@jit
+def _pair_links(members, pair_a, pair_b, head, nxt, to):
+    index = np.empty(pair_a.shape[0], dtype=np.int64)
+    for p in range(pair_a.shape[0]):
+        index[p] = link_index(head, nxt, to, members[pair_a[p]], members[pair_b[p]])
+    return index
 
 
 @jit

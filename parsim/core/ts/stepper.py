@@ -128,7 +128,9 @@ class _Run:
         seeds = np.unique(made.reshape(-1))
         moving, anchors = select_spheres(self.X, involved, seeds, self.L, k)
         problem = build_problem(self.X, self.R, moving, anchors, self.links, self.reach, self.local_of)
-        outcome = minimise(problem, self.daha, self.attraction_range, self.exchange)
+        carried = self._carried_multipliers(problem) if self.daha.carry_multipliers else None
+        outcome = minimise(problem, self.daha, self.attraction_range, self.exchange, multipliers=carried)
+        self._keep_multipliers(problem, outcome.multipliers)
         self.n_minimisations += 1
         self.n_iterations += outcome.iterations
         self.max_iterations = max(self.max_iterations, outcome.iterations)
@@ -139,10 +141,21 @@ class _Run:
         if not outcome.converged:
             raise MinimiserFailure(
                 f"DAHA did not converge in {outcome.iterations} iterations, {where}: mean overlap "
-                f"{outcome.mean_overlap:.3g} (eps_c {self.daha.overlap_tolerance:g}), last step "
+                f"{outcome.mean_overlap:.3g} (eps_c {self.daha.overlap_tolerance:g}), deepest overlap "
+                f"{outcome.max_overlap:.3g} (eps_max {self.daha.max_overlap_tolerance:g}), last step "
                 f"{outcome.max_step:.3g} (eps_s {self.daha.steadiness_tolerance:g})")
         self.X[moving] = problem.positions[: problem.n_moving]
         return moving
+
+    def _carried_multipliers(self, problem):
+        """Each candidate pair's multiplier at the end of its link's last minimisation (NaN if none)."""
+        index = problem.pair_links(self.links)
+        return np.where(index >= 0, self.links.multiplier[index], np.nan)
+
+    def _keep_multipliers(self, problem, multipliers):
+        index = problem.pair_links(self.links)
+        linked = index >= 0
+        self.links.multiplier[index[linked]] = multipliers[linked]
 
 
 def simulate_ts(positions, velocities, radii, masses, box_length, time_step_factor=0.005,
