@@ -8,7 +8,8 @@ import xarray as xr
 
 from parsim.comparison import markdown, method_comparison
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
-from parsim.core.ts import DahaParameters, simulate_ts
+from parsim.core.ts import DahaParameters, simulate_ts, stepper
+from parsim.core.ts.contacts import cross_cluster_contacts
 from parsim.core.ts.daha import attraction_energy, minimise
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import build_problem
@@ -148,6 +149,33 @@ def test_merges_conserve_momentum_away_from_walls():
     before = (masses[:, None] * v).sum(axis=0)
     after = (masses[:, None] * result.velocities).sum(axis=0)
     assert np.allclose(after, before, rtol=0, atol=1e-14)
+
+
+def test_two_discs_link_at_the_first_step_they_overlap(monkeypatch):
+    """Head-on approach, gap 2.61, closing 2 dt(0) = 0.04 per step: contact in step 66, not
+    earlier, and the quiet steps before it skip the contact searches."""
+    searches = []
+
+    def counted(*args):
+        searches.append(1)
+        return cross_cluster_contacts(*args)
+
+    monkeypatch.setattr(stepper, "cross_cluster_contacts", counted)
+    x = np.array([[5.0, 10.0], [8.01, 10.0]])
+    v = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    result = simulate_ts(x, v, np.full(2, R), np.ones(2), 20.0, time_step_factor=0.001)
+    assert result.n_steps == 66 and result.link_steps.tolist() == [66]
+    assert len(searches) < 66 / 4  # a search per ~QUIET_HORIZON_STEPS steps, not per step
+
+
+def test_quiet_steps_change_nothing_but_round_off(monkeypatch):
+    x, v, radii, masses, length = paper_system(200, 0.1, seed=6)
+    fused = simulate_ts(x, v, radii, masses, length)
+    monkeypatch.setattr(stepper._Run, "quiet_steps", lambda self, dt: 0.0)
+    stepwise = simulate_ts(x, v, radii, masses, length)
+    assert np.array_equal(fused.links, stepwise.links) and np.array_equal(fused.link_steps, stepwise.link_steps)
+    assert (fused.n_steps, fused.n_wall_reflections) == (stepwise.n_steps, stepwise.n_wall_reflections)
+    assert np.allclose(fused.positions, stepwise.positions, rtol=0, atol=1e-9)
 
 
 def test_almost_rigid_with_one_tile_is_the_non_rigid_method():

@@ -15,6 +15,10 @@ Time step.  ``dt(0) = factor L / max_i |V_i|`` (Table 1).  It grows linearly wit
 fraction of merges done, ``dt = dt(0) (1 + (N - M) / (N - 1))`` with ``M`` clusters,
 from ``dt(0)`` at the start to ``2 dt(0)`` when a single cluster remains.
 
+Quiet steps.  After a time step that made no link, the stepper bounds how many of the
+next steps can make no contact and no wall reflection (:mod:`parsim.core.ts.quiet`) and
+advances them with one advection, skipping contact searches that would find nothing.
+
 Formulations.  ``"non_rigid"`` (section 3.1): every sphere of the interacting clusters
 moves and every link attracts (eq. 3.5).  ``"almost_rigid"`` (section 3.3): only the
 interacting spheres in the tiles holding a new link move, those in the surrounding
@@ -33,6 +37,7 @@ from parsim.core.ts.contacts import cross_cluster_contacts, unlinked_contacts
 from parsim.core.ts.daha import DahaParameters, minimise
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import build_problem
+from parsim.core.ts.quiet import quiet_steps
 from parsim.core.ts.tiles import select_spheres, tiles_per_side
 
 FORMULATIONS = ("almost_rigid", "non_rigid")
@@ -43,6 +48,8 @@ TABLE1_TIME_STEP_FACTORS = (0.005, 0.01, 0.015)
 CANDIDATE_REACH = 1.0
 #: Rounds of steps 2c-2d in one time step before it is reported as not settling.
 MAX_LINK_ROUNDS = 1000
+#: The quiet-step search examines pairs up to the gap the fastest pair closes in this many steps.
+QUIET_HORIZON_STEPS = 8
 
 
 class MinimiserFailure(RuntimeError):
@@ -97,11 +104,19 @@ class _Run:
         self.n_iterations = 0
         self.max_iterations = 0
 
+    def quiet_steps(self, dt):
+        """How many of the next steps of length ``dt`` certainly make no link and no reflection."""
+        fastest = float(np.sqrt((self.V**2).sum(axis=1)).max())
+        horizon = min(QUIET_HORIZON_STEPS * 2.0 * fastest * dt, self.L / 4.0)
+        k, side = grid_size(self.L, 2.0 * float(self.R.max()) + horizon, self.d, self.n)
+        return quiet_steps(self.X, self.V, self.R, self.cluster, self.n_clusters, self.L, dt, horizon, side, k)
+
     def interact(self, step, time):
-        """Step 2: link, minimise, link what the minimisation made touch, until nothing new."""
+        """Step 2: link, minimise, link what the minimisation made touch, until nothing new.
+        Returns whether any link was made."""
         new = cross_cluster_contacts(self.X, self.R, self.cluster, self.grid_side, self.grid_k)
         if new.shape[0] == 0:
-            return
+            return False
         made = [new]
         self.links.add(new[:, 0], new[:, 1], step)
         for _ in range(MAX_LINK_ROUNDS):
@@ -118,6 +133,7 @@ class _Run:
         labels, m = merge_clusters(self.cluster, self.n_clusters, np.concatenate(made))
         mass_weighted_velocities(self.V, self.m, labels, m)  # step 3, eq. 2.9
         self.cluster, self.n_clusters = labels, m
+        return True
 
     def _minimise(self, made, step, time):
         involved = involved_spheres(self.cluster, self.n_clusters, made)
@@ -156,6 +172,12 @@ class _Run:
         index = problem.pair_links(self.links)
         linked = index >= 0
         self.links.multiplier[index[linked]] = multipliers[linked]
+
+
+def _quiet_steps_within(quiet, steps_left, time_left_in_steps):
+    """``quiet`` (a float bound) as a number of steps that stays within the run's limits."""
+    return int(min(quiet, steps_left, math.floor(time_left_in_steps) if math.isfinite(time_left_in_steps)
+                   else math.inf))
 
 
 def simulate_ts(positions, velocities, radii, masses, box_length, time_step_factor=0.005,
@@ -202,6 +224,7 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
     n_wall = 0
     clusters, times = [], []
     reason = "single_cluster"
+    linked = True
     while run.n_clusters > 1:
         if t >= max_time:
             reason = "max_time"
@@ -209,12 +232,23 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
         if step >= max_steps:
             reason = "max_steps"
             break
-        dt = min(dt0 * (1.0 + (n - run.n_clusters) / (n - 1)), max_time - t)
+        dt = dt0 * (1.0 + (n - run.n_clusters) / (n - 1))
+        quiet = 0 if linked else _quiet_steps_within(run.quiet_steps(dt), max_steps - step, (max_time - t) / dt)
+        if quiet > 0:  # steps 1 only: nothing touches, nothing reaches a wall
+            X += (quiet * dt) * V
+            for _ in range(quiet):
+                t += dt
+                times.append(t)
+            clusters.extend([run.n_clusters] * quiet)
+            step += quiet
+            linked = True  # the next step may link: search it
+            continue
+        dt = min(dt, max_time - t)
         step += 1
         X += dt * V  # step 1, free advection
         t += dt
         n_wall += reflect_at_walls(X, V, R, run.cluster, run.n_clusters, L)
-        run.interact(step, t)
+        linked = run.interact(step, t)
         clusters.append(run.n_clusters)
         times.append(t)
     return TSResult(positions=X, velocities=V, cluster=run.cluster, links=run.links.pairs(),

@@ -1,0 +1,107 @@
+"""Quiet time steps: how many of the coming steps certainly change nothing but positions.
+
+In the late stage of an aggregation a few slow clusters drift for thousands of time steps
+before the next collision, and each step would pay a contact search over the whole box.
+Over ``j`` steps of constant ``dt`` two spheres approach by at most ``j dt |V_i - V_j|``
+(straight lines), so a pair with gap ``g`` cannot touch while ``j dt |V_i - V_j| < g``;
+a cluster whose bounding box is inside the box reaches a wall after a number of steps
+read off its velocity.  The stepper advances all those steps with one advection: the
+steps still happen (time, histories, the dt law), only the searches that would have
+found nothing are skipped.  Bounds are taken conservatively (round-off shortens them).
+"""
+
+import math
+
+import numpy as np
+
+from parsim.core.celllist import block_cells, build_cells, neighbour_offsets
+from parsim.core.jit import jit
+
+#: Relative safety margin on every bound, far above round-off.
+MARGIN = 1e-9
+
+
+@jit
+def _steps_before(distance, closing):
+    """Largest ``j >= 0`` with ``j closing < distance`` (less the margin); ``closing >= 0``."""
+    if distance <= 0.0:
+        return 0.0
+    if closing <= 0.0:
+        return math.inf
+    return math.floor(distance * (1.0 - MARGIN) / closing)
+
+
+@jit
+def _steps_before_contact(X, V, R, cluster, dt, horizon, side, k):
+    """Steps during which no two spheres of different clusters can touch.
+
+    Pairs with a gap up to ``horizon`` are examined one by one; every other pair is at
+    least ``horizon`` apart and closes by at most ``2 max|V| dt`` per step.  The grid (``k``
+    cells per side of length ``side >= 2 max R + horizon``) covers the points.
+    """
+    n, d = X.shape
+    fastest = 0.0
+    for i in range(n):
+        s = 0.0
+        for a in range(d):
+            s += V[i, a] * V[i, a]
+        fastest = max(fastest, s)
+    steps = _steps_before(horizon, 2.0 * math.sqrt(fastest) * dt)
+    head, nxt, _, cell_of, _ = build_cells(X, side, k)
+    offsets = neighbour_offsets(d)
+    coords = np.empty(d, dtype=np.int64)
+    block = np.empty(offsets.shape[0], dtype=np.int64)
+    for i in range(n):
+        nb = block_cells(cell_of[i], k, offsets, coords, block)
+        for b in range(nb):
+            j = head[block[b]]
+            while j >= 0:
+                if j > i and cluster[j] != cluster[i]:
+                    s = 0.0
+                    w = 0.0
+                    for a in range(d):
+                        dx = X[i, a] - X[j, a]
+                        dv = V[i, a] - V[j, a]
+                        s += dx * dx
+                        w += dv * dv
+                    gap = math.sqrt(s) - R[i] - R[j]
+                    if gap <= horizon:
+                        steps = min(steps, _steps_before(gap, math.sqrt(w) * dt))
+                j = nxt[j]
+    return steps
+
+
+@jit
+def _steps_before_wall(X, V, R, cluster, n_clusters, box_length, dt):
+    """Steps during which no cluster gets a sphere outside ``[0, L]^d`` (no reflection)."""
+    n, d = X.shape
+    low = np.full((n_clusters, d), np.inf)
+    high = np.full((n_clusters, d), -np.inf)
+    velocity = np.zeros((n_clusters, d))
+    for i in range(n):
+        c = cluster[i]
+        for a in range(d):
+            low[c, a] = min(low[c, a], X[i, a] - R[i])
+            high[c, a] = max(high[c, a], X[i, a] + R[i])
+            velocity[c, a] = V[i, a]  # one velocity per cluster (eq. 2.9)
+    steps = math.inf
+    for c in range(n_clusters):
+        for a in range(d):
+            if velocity[c, a] < 0.0:
+                steps = min(steps, _steps_before(low[c, a], -velocity[c, a] * dt))
+            elif velocity[c, a] > 0.0:
+                steps = min(steps, _steps_before(box_length - high[c, a], velocity[c, a] * dt))
+    return steps
+
+
+def quiet_steps(X, V, R, cluster, n_clusters, box_length, dt, horizon, side, k):
+    """How many of the next time steps of length ``dt`` can make no contact and no wall
+    reflection (a float, possibly ``inf``); see the module docstring.
+
+    ``horizon`` is the gap up to which pairs are examined one by one; the cell grid
+    (``k`` per side of length ``side``) must have ``side >= 2 max R + horizon``.
+    """
+    walls = _steps_before_wall(X, V, R, cluster, n_clusters, box_length, dt)
+    if walls == 0.0:
+        return 0.0
+    return min(walls, _steps_before_contact(X, V, R, cluster, dt, horizon, side, k))
