@@ -21,8 +21,8 @@ PARAMS = DahaParameters()
 #: A pair "in contact" after DAHA: its overlap measure sqrt(phi) is of order eps_c, so the
 #: gap is of order eps_c^2 / (4R); a few times that bounds any single pair.
 CONTACT_GAP = 10 * PARAMS.overlap_tolerance**2 / (4 * R)
-#: The deepest overlap DAHA accepts: sqrt(phi_ij) <= eps_max means a gap >= -eps_max^2 / (4R) (to first order).
-DEEPEST_GAP = -1.01 * PARAMS.max_overlap_tolerance**2 / (4 * R)
+#: The deepest overlap DAHA accepts: sqrt(phi_ij) <= eps_max, a gap of at least sqrt(4R^2 - eps_max^2) - 2R.
+DEEPEST_GAP = math.sqrt(4 * R**2 - PARAMS.max_overlap_tolerance**2) - 2 * R - 1e-12
 
 
 def all_gaps(x, radii):

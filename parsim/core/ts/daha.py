@@ -101,7 +101,7 @@ class DahaParameters:
     multiplier_rate: float = 3.0  #: beta_bar of (3.29)
     overlap_tolerance: float = 1e-2  #: eps_c of (3.28), a length
     steadiness_tolerance: float = 1e-3  #: eps_s of (3.27), a length
-    max_overlap_tolerance: float = 3e-2  #: eps_max, bound on the deepest overlap max o_ij, a length
+    max_overlap_tolerance: float = 0.1  #: eps_max, bound on the deepest overlap max o_ij, a length
     initial_multiplier: float = 1.0  #: lambda of (3.26)
     dynamic: bool = False  #: c and beta from (3.29); False: the constants c_bar, beta_bar of (3.15)-(3.16)
     max_iterations: int = 100_000
