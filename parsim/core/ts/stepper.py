@@ -144,9 +144,11 @@ class _Run:
         seeds = np.unique(made.reshape(-1))
         moving, anchors = select_spheres(self.X, involved, seeds, self.L, k)
         problem = build_problem(self.X, self.R, moving, anchors, self.links, self.reach, self.local_of)
-        carried = self._carried_multipliers(problem) if self.daha.carry_multipliers else None
+        carry = self.daha.carry_multipliers
+        carried = self._carried_multipliers(problem) if carry else None
         outcome = minimise(problem, self.daha, self.attraction_range, self.exchange, multipliers=carried)
-        self._keep_multipliers(problem, outcome.multipliers)
+        if carry:
+            self._keep_multipliers(problem, outcome.multipliers)
         self.n_minimisations += 1
         self.n_iterations += outcome.iterations
         self.max_iterations = max(self.max_iterations, outcome.iterations)
@@ -224,7 +226,7 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
     n_wall = 0
     clusters, times = [], []
     reason = "single_cluster"
-    linked = True
+    look_ahead = False  # after a step that made no link, look for quiet steps
     while run.n_clusters > 1:
         if t >= max_time:
             reason = "max_time"
@@ -233,7 +235,7 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
             reason = "max_steps"
             break
         dt = dt0 * (1.0 + (n - run.n_clusters) / (n - 1))
-        quiet = 0 if linked else _quiet_steps_within(run.quiet_steps(dt), max_steps - step, (max_time - t) / dt)
+        quiet = _quiet_steps_within(run.quiet_steps(dt), max_steps - step, (max_time - t) / dt) if look_ahead else 0
         if quiet > 0:  # steps 1 only: nothing touches, nothing reaches a wall
             X += (quiet * dt) * V
             for _ in range(quiet):
@@ -241,14 +243,14 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
                 times.append(t)
             clusters.extend([run.n_clusters] * quiet)
             step += quiet
-            linked = True  # the next step may link: search it
+            look_ahead = False  # the next step may link: search it
             continue
         dt = min(dt, max_time - t)
         step += 1
         X += dt * V  # step 1, free advection
         t += dt
         n_wall += reflect_at_walls(X, V, R, run.cluster, run.n_clusters, L)
-        linked = run.interact(step, t)
+        look_ahead = not run.interact(step, t)
         clusters.append(run.n_clusters)
         times.append(t)
     return TSResult(positions=X, velocities=V, cluster=run.cluster, links=run.links.pairs(),
