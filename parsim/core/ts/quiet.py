@@ -32,12 +32,13 @@ def _steps_before(distance, closing):
 
 
 @jit
-def _steps_before_contact(X, V, R, cluster, dt, horizon, side, k):
+def _steps_before_contact(X, V, R, cluster, queries, dt, horizon, side, k):
     """Steps during which no two spheres of different clusters can touch.
 
-    Pairs with a gap up to ``horizon`` are examined one by one; every other pair is at
-    least ``horizon`` apart and closes by at most ``2 max|V| dt`` per step.  The grid (``k``
-    cells per side of length ``side >= 2 max R + horizon``) covers the points.
+    Every pair of different clusters has an end in ``queries`` (all spheres but those of
+    one cluster).  Pairs with a gap up to ``horizon`` are examined one by one; every other
+    pair is at least ``horizon`` apart and closes by at most ``2 max|V| dt`` per step.  The
+    grid (``k`` cells per side of length ``side >= 2 max R + horizon``) covers the points.
     """
     n, d = X.shape
     fastest = 0.0
@@ -51,12 +52,12 @@ def _steps_before_contact(X, V, R, cluster, dt, horizon, side, k):
     offsets = neighbour_offsets(d)
     coords = np.empty(d, dtype=np.int64)
     block = np.empty(offsets.shape[0], dtype=np.int64)
-    for i in range(n):
+    for i in queries:
         nb = block_cells(cell_of[i], k, offsets, coords, block)
         for b in range(nb):
             j = head[block[b]]
             while j >= 0:
-                if j > i and cluster[j] != cluster[i]:
+                if cluster[j] != cluster[i]:
                     s = 0.0
                     w = 0.0
                     for a in range(d):
@@ -99,9 +100,11 @@ def quiet_steps(X, V, R, cluster, n_clusters, box_length, dt, horizon, side, k):
     reflection (a float, possibly ``inf``); see the module docstring.
 
     ``horizon`` is the gap up to which pairs are examined one by one; the cell grid
-    (``k`` per side of length ``side``) must have ``side >= 2 max R + horizon``.
+    (``k`` per side of length ``side``) must have ``side >= 2 max R + horizon``.  Pairs are
+    searched from the spheres outside the largest cluster only (in the late stage, a few).
     """
     walls = _steps_before_wall(X, V, R, cluster, n_clusters, box_length, dt)
     if walls == 0.0:
         return 0.0
-    return min(walls, _steps_before_contact(X, V, R, cluster, dt, horizon, side, k))
+    queries = np.flatnonzero(cluster != np.bincount(cluster, minlength=n_clusters).argmax())
+    return min(walls, _steps_before_contact(X, V, R, cluster, queries, dt, horizon, side, k))

@@ -48,8 +48,9 @@ TABLE1_TIME_STEP_FACTORS = (0.005, 0.01, 0.015)
 CANDIDATE_REACH = 1.0
 #: Rounds of steps 2c-2d in one time step before it is reported as not settling.
 MAX_LINK_ROUNDS = 1000
-#: The quiet-step search examines pairs up to the gap the fastest pair closes in this many steps.
-QUIET_HORIZON_STEPS = 8
+#: The quiet-step search examines pairs up to the gap the fastest pair closes in this many steps
+#: (doubling after each quiet stretch found, up to the most, back to the least after a link).
+QUIET_HORIZON_STEPS = (8, 1024)
 
 
 class MinimiserFailure(RuntimeError):
@@ -103,13 +104,16 @@ class _Run:
         self.n_minimisations = 0
         self.n_iterations = 0
         self.max_iterations = 0
+        self.horizon_steps = QUIET_HORIZON_STEPS[0]
 
     def quiet_steps(self, dt):
         """How many of the next steps of length ``dt`` certainly make no link and no reflection."""
         fastest = float(np.sqrt((self.V**2).sum(axis=1)).max())
-        horizon = min(QUIET_HORIZON_STEPS * 2.0 * fastest * dt, self.L / 4.0)
+        horizon = min(self.horizon_steps * 2.0 * fastest * dt, self.L / 4.0)
         k, side = grid_size(self.L, 2.0 * float(self.R.max()) + horizon, self.d, self.n)
-        return quiet_steps(self.X, self.V, self.R, self.cluster, self.n_clusters, self.L, dt, horizon, side, k)
+        quiet = quiet_steps(self.X, self.V, self.R, self.cluster, self.n_clusters, self.L, dt, horizon, side, k)
+        self.horizon_steps = min(2 * self.horizon_steps, QUIET_HORIZON_STEPS[1]) if quiet > 0 else QUIET_HORIZON_STEPS[0]
+        return quiet
 
     def interact(self, step, time):
         """Step 2: link, minimise, link what the minimisation made touch, until nothing new.
