@@ -11,13 +11,8 @@ from parsim.core.jit import jit
 
 
 @jit
-def reflect_at_walls(X, V, R, cluster, n_clusters, box_length):
-    """Reflect every cluster that has a sphere outside ``[0, L]^d`` back into the box.
-
-    A cluster reaching past a wall is mirrored across it as a whole (its extreme sphere
-    then lies as far inside as it was outside) and its velocity component normal to the
-    wall points inwards.  Returns the number of reflections.
-    """
+def cluster_bounds(X, R, cluster, n_clusters):
+    """Lowest and highest extent (``X -+ R``) of each cluster along each axis, ``(M, d)`` each."""
     n, d = X.shape
     low = np.full((n_clusters, d), np.inf)
     high = np.full((n_clusters, d), -np.inf)
@@ -26,6 +21,19 @@ def reflect_at_walls(X, V, R, cluster, n_clusters, box_length):
         for a in range(d):
             low[c, a] = min(low[c, a], X[i, a] - R[i])
             high[c, a] = max(high[c, a], X[i, a] + R[i])
+    return low, high
+
+
+@jit
+def reflect_at_walls(X, V, R, cluster, n_clusters, box_length):
+    """Reflect every cluster that has a sphere outside ``[0, L]^d`` back into the box.
+
+    A cluster reaching past a wall is mirrored across it as a whole (its extreme sphere
+    then lies as far inside as it was outside) and its velocity component normal to the
+    wall points inwards.  Returns the number of reflections.
+    """
+    n, d = X.shape
+    low, high = cluster_bounds(X, R, cluster, n_clusters)
     shift = np.zeros((n_clusters, d))
     flip = np.zeros((n_clusters, d), dtype=np.int8)  # +1: move up, -1: move down
     count = 0

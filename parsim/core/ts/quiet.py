@@ -16,6 +16,7 @@ import numpy as np
 
 from parsim.core.celllist import block_cells, build_cells, neighbour_offsets
 from parsim.core.jit import jit
+from parsim.core.ts.clusters import cluster_bounds
 
 #: Relative safety margin on every bound, far above round-off.
 MARGIN = 1e-9
@@ -32,22 +33,18 @@ def _steps_before(distance, closing):
 
 
 @jit
-def _steps_before_contact(X, V, R, cluster, queries, dt, horizon, side, k):
+def _steps_before_contact(X, V, R, cluster, queries, dt, fastest, horizon, side, k):
     """Steps during which no two spheres of different clusters can touch.
 
-    Every pair of different clusters has an end in ``queries`` (all spheres but those of
-    one cluster).  Pairs with a gap up to ``horizon`` are examined one by one; every other
-    pair is at least ``horizon`` apart and closes by at most ``2 max|V| dt`` per step.  The
-    grid (``k`` cells per side of length ``side >= 2 max R + horizon``) covers the points.
+    Every pair of different clusters has an end in ``queries``.  Pairs with a gap up to
+    ``horizon`` are examined one by one; every other pair is at least ``horizon`` apart
+    and closes by at most ``2 fastest dt`` per step.  The grid (``k`` cells per side of
+    length ``side >= 2 max R + horizon``) covers the points.  The scan is the one of
+    :func:`parsim.core.ts.contacts._near_pairs`, reduced on the fly: with the horizon of
+    a late-stage search, collecting the pairs first made the run several times slower.
     """
     n, d = X.shape
-    fastest = 0.0
-    for i in range(n):
-        s = 0.0
-        for a in range(d):
-            s += V[i, a] * V[i, a]
-        fastest = max(fastest, s)
-    steps = _steps_before(horizon, 2.0 * math.sqrt(fastest) * dt)
+    steps = _steps_before(horizon, 2.0 * fastest * dt)
     head, nxt, _, cell_of, _ = build_cells(X, side, k)
     offsets = neighbour_offsets(d)
     coords = np.empty(d, dtype=np.int64)
@@ -75,19 +72,13 @@ def _steps_before_contact(X, V, R, cluster, queries, dt, horizon, side, k):
 @jit
 def _steps_before_wall(X, V, R, cluster, n_clusters, box_length, dt):
     """Steps during which no cluster gets a sphere outside ``[0, L]^d`` (no reflection)."""
-    n, d = X.shape
-    low = np.full((n_clusters, d), np.inf)
-    high = np.full((n_clusters, d), -np.inf)
-    velocity = np.zeros((n_clusters, d))
-    for i in range(n):
-        c = cluster[i]
-        for a in range(d):
-            low[c, a] = min(low[c, a], X[i, a] - R[i])
-            high[c, a] = max(high[c, a], X[i, a] + R[i])
-            velocity[c, a] = V[i, a]  # one velocity per cluster (eq. 2.9)
+    low, high = cluster_bounds(X, R, cluster, n_clusters)
+    velocity = np.zeros_like(low)
+    for i in range(X.shape[0]):
+        velocity[cluster[i]] = V[i]  # one velocity per cluster (eq. 2.9)
     steps = math.inf
     for c in range(n_clusters):
-        for a in range(d):
+        for a in range(X.shape[1]):
             if velocity[c, a] < 0.0:
                 steps = min(steps, _steps_before(low[c, a], -velocity[c, a] * dt))
             elif velocity[c, a] > 0.0:
@@ -95,16 +86,17 @@ def _steps_before_wall(X, V, R, cluster, n_clusters, box_length, dt):
     return steps
 
 
-def quiet_steps(X, V, R, cluster, n_clusters, box_length, dt, horizon, side, k):
+def quiet_steps(X, V, R, cluster, n_clusters, box_length, dt, fastest, horizon, side, k):
     """How many of the next time steps of length ``dt`` can make no contact and no wall
     reflection (a float, possibly ``inf``); see the module docstring.
 
-    ``horizon`` is the gap up to which pairs are examined one by one; the cell grid
-    (``k`` per side of length ``side``) must have ``side >= 2 max R + horizon``.  Pairs are
-    searched from the spheres outside the largest cluster only (in the late stage, a few).
+    ``fastest`` is ``max |V_i|``; ``horizon`` the gap up to which pairs are examined one by
+    one; the cell grid (``k`` per side of length ``side``) must have
+    ``side >= 2 max R + horizon``.  Every pair of different clusters has an end outside the
+    largest cluster, so the pairs are searched from those spheres (in the late stage, a few).
     """
     walls = _steps_before_wall(X, V, R, cluster, n_clusters, box_length, dt)
     if walls == 0.0:
         return 0.0
     queries = np.flatnonzero(cluster != np.bincount(cluster, minlength=n_clusters).argmax())
-    return min(walls, _steps_before_contact(X, V, R, cluster, queries, dt, horizon, side, k))
+    return min(walls, _steps_before_contact(X, V, R, cluster, queries, dt, fastest, horizon, side, k))

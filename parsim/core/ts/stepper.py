@@ -111,7 +111,8 @@ class _Run:
         fastest = float(np.sqrt((self.V**2).sum(axis=1)).max())
         horizon = min(self.horizon_steps * 2.0 * fastest * dt, self.L / 4.0)
         k, side = grid_size(self.L, 2.0 * float(self.R.max()) + horizon, self.d, self.n)
-        quiet = quiet_steps(self.X, self.V, self.R, self.cluster, self.n_clusters, self.L, dt, horizon, side, k)
+        quiet = quiet_steps(self.X, self.V, self.R, self.cluster, self.n_clusters, self.L, dt, fastest, horizon,
+                            side, k)
         self.horizon_steps = min(2 * self.horizon_steps, QUIET_HORIZON_STEPS[1]) if quiet > 0 else QUIET_HORIZON_STEPS[0]
         return quiet
 
