@@ -1,6 +1,7 @@
 """Tests of the time-stepping aggregation with the DAHA minimiser (parsim.core.ts)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ from parsim.comparison import markdown, method_comparison
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
 from parsim.core.ts import DahaParameters, simulate_ts, stepper
 from parsim.core.ts.contacts import cross_cluster_contacts
-from parsim.core.ts.daha import attraction_energy, minimise
+from parsim.core.ts.daha import FULL_SWEEP_EVERY, attraction_energy, minimise
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import build_problem
 from tests.datasets import reproducible_part, run_serial
@@ -85,6 +86,38 @@ def test_a_converged_clump_restarted_with_its_multipliers_stays_put():
     again = minimise(problem, PARAMS, multipliers=first.multipliers)
     assert again.converged and again.iterations <= 3 < first.iterations
     assert np.abs(problem.positions - settled).max() < PARAMS.steadiness_tolerance
+
+
+def touching_links(x, first=0):
+    """Links between every pair of overlapping discs of ``x`` (numbered from ``first``)."""
+    i, j = np.triu_indices(len(x), 1)
+    touching = all_gaps(x, np.full(len(x), R)) <= 0
+    return first + np.stack([i[touching], j[touching]], axis=1)
+
+
+def test_sleeping_spheres_give_the_plain_jacobi_result():
+    """A settled clump restarted with its multipliers while a fresh clump overlaps far away
+    (the settled spheres can sleep): with and without sleeping DAHA meets the same
+    stopping conditions and ends in the same configuration within the steadiness tolerance."""
+    rng = np.random.default_rng(3)
+    x = 5.0 + rng.uniform(0.0, 0.4 * math.sqrt(30), (30, 2))
+    settled, _ = problem_of(x, touching_links(x))
+    tight = replace(PARAMS, overlap_tolerance=PARAMS.overlap_tolerance / 10)  # every contact well inside eps_c
+    settled_multipliers = minimise(settled, tight).multipliers  # DAHA may refresh the pairs: read them after
+    multiplier_of = dict(zip(zip(settled.pair_a, settled.pair_b), settled_multipliers))
+    fresh = 12.0 + rng.uniform(0.0, 0.4 * math.sqrt(10), (10, 2))
+    x = np.vstack([settled.positions, fresh])
+    links = np.vstack([touching_links(x[:30]), touching_links(fresh, first=30)])
+    finals = []
+    for sleep in (0.0, PARAMS.sleep_tolerance):
+        problem, radii = problem_of(x, links)
+        carried = np.array([multiplier_of.get(pair, np.nan) for pair in zip(problem.pair_a, problem.pair_b)])
+        outcome = minimise(problem, replace(PARAMS, sleep_tolerance=sleep), multipliers=carried)
+        assert outcome.converged and outcome.iterations > FULL_SWEEP_EVERY
+        assert outcome.mean_overlap <= PARAMS.overlap_tolerance and outcome.max_step <= PARAMS.steadiness_tolerance
+        assert all_gaps(problem.positions, radii).min() >= DEEPEST_GAP
+        finals.append(problem.positions.copy())
+    assert np.abs(finals[0] - finals[1]).max() < 10 * PARAMS.steadiness_tolerance
 
 
 def test_energy_decreases_while_the_constraints_hold():

@@ -88,6 +88,9 @@ PARAMETERS = (
     _ts("daha_initial_multiplier", float, _DAHA.initial_multiplier, "1", "lambda of eq. 3.26", low=0.0),
     _ts("daha_carry_multipliers", bool, _DAHA.carry_multipliers, "1", "a link starts each minimisation from "
         "its multiplier at the end of the previous one (false: eq. 3.26 for every pair, 10x slower)"),
+    _ts("daha_sleep_tolerance", float, _DAHA.sleep_tolerance, LENGTH_UNITS, "a sphere that moved at most this in "
+        "a full DAHA sweep, and overlaps no partner by more than eps_c, is skipped until a partner moves "
+        "(0: every sphere in every iteration)", low=0.0),
     _ts("daha_max_iterations", int, _DAHA.max_iterations, "1", "DAHA iterations before a minimisation is "
         "reported as not converged", low=1),
 )
@@ -181,7 +184,8 @@ def daha_parameters(params: dict) -> DahaParameters:
         steadiness_tolerance=params["daha_steadiness_tolerance"],
         max_overlap_tolerance=params["daha_max_overlap_tolerance"],
         initial_multiplier=params["daha_initial_multiplier"], dynamic=params["daha_dynamic"],
-        max_iterations=params["daha_max_iterations"], carry_multipliers=params["daha_carry_multipliers"])
+        max_iterations=params["daha_max_iterations"], carry_multipliers=params["daha_carry_multipliers"],
+        sleep_tolerance=params["daha_sleep_tolerance"])
 
 
 def _run_ts(params, positions, velocities, radii, masses, length) -> _Run:
