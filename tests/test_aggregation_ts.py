@@ -33,6 +33,13 @@ def all_gaps(x, radii):
     return (distance - (radii[:, None] + radii[None, :]))[iu]
 
 
+def touching_links(x, first=0):
+    """Links between every pair of overlapping discs of ``x`` (numbered from ``first``)."""
+    i, j = np.triu_indices(len(x), 1)
+    touching = all_gaps(x, np.full(len(x), R)) <= 0
+    return first + np.stack([i[touching], j[touching]], axis=1)
+
+
 def problem_of(x, links_ij, moving=None):
     """All spheres moving (unless ``moving`` is given, then the others are anchors)."""
     n = len(x)
@@ -61,10 +68,8 @@ def test_a_clump_of_overlapping_discs_converges(k):
     rng = np.random.default_rng(k)
     x = 5.0 + rng.uniform(0.0, 0.4 * math.sqrt(k), (k, 2))  # area fraction ~0.8: many overlaps
     gaps = all_gaps(x, np.full(k, R))
-    i, j = np.triu_indices(k, 1)
-    touching = gaps <= 0
-    assert touching.sum() >= k / 2
-    problem, radii = problem_of(x, np.stack([i[touching], j[touching]], axis=1))
+    assert (gaps <= 0).sum() >= k / 2
+    problem, radii = problem_of(x, touching_links(x))
     outcome = minimise(problem, PARAMS)
     assert outcome.converged, outcome
     assert outcome.mean_overlap <= PARAMS.overlap_tolerance  # eq. 3.28
@@ -78,21 +83,12 @@ def test_a_converged_clump_restarted_with_its_multipliers_stays_put():
     restarting DAHA there (what the stepper does for settled links) changes nothing."""
     rng = np.random.default_rng(3)
     x = 5.0 + rng.uniform(0.0, 0.4 * math.sqrt(30), (30, 2))
-    i, j = np.triu_indices(30, 1)
-    touching = all_gaps(x, np.full(30, R)) <= 0
-    problem, _ = problem_of(x, np.stack([i[touching], j[touching]], axis=1))
+    problem, _ = problem_of(x, touching_links(x))
     first = minimise(problem, PARAMS)
     settled = problem.positions.copy()
     again = minimise(problem, PARAMS, multipliers=first.multipliers)
     assert again.converged and again.iterations <= 3 < first.iterations
     assert np.abs(problem.positions - settled).max() < PARAMS.steadiness_tolerance
-
-
-def touching_links(x, first=0):
-    """Links between every pair of overlapping discs of ``x`` (numbered from ``first``)."""
-    i, j = np.triu_indices(len(x), 1)
-    touching = all_gaps(x, np.full(len(x), R)) <= 0
-    return first + np.stack([i[touching], j[touching]], axis=1)
 
 
 def test_sleeping_spheres_give_the_plain_jacobi_result():
