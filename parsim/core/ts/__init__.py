@@ -8,7 +8,8 @@ Modules, one job each:
 - :mod:`~parsim.core.ts.daha`: the minimiser (3.20)–(3.29), with the sign choice derived
   from (3.15)–(3.16);
 - :mod:`~parsim.core.ts.tiles`: the inner/outer rectangles of the almost-rigid form (3.3);
-- :mod:`~parsim.core.ts.problem`: one minimisation assembled from the global state;
+- :mod:`~parsim.core.ts.problem`: one minimisation assembled from a process's spheres (and ghosts);
+- :mod:`~parsim.core.ts.domain`: where the spheres live (one process, or MPI ranks);
 - :mod:`~parsim.core.ts.contacts`: contact and candidate-pair searches on cell lists;
 - :mod:`~parsim.core.ts.links`: the link set ``S``;
 - :mod:`~parsim.core.ts.clusters`: wall reflection, relabelling, eq. 2.9.

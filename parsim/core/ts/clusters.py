@@ -1,6 +1,9 @@
 """Cluster bookkeeping of the time-stepping method: wall reflection (section 3, item ii),
 relabelling from the links and the mass-weighted velocity (step 3, eq. 2.9).
 
+The kernels read only the spheres they are given, so that a decomposed run calls them on
+each rank's spheres and combines the small results (overruns, momentum sums) over ranks.
+
 Cluster labels are compact, ``0 .. M-1``, numbered in order of first appearance over
 the spheres (the numbering of the event-driven solver).
 """
@@ -11,51 +14,64 @@ from parsim.core.jit import jit
 
 
 @jit
-def cluster_bounds(X, R, cluster, n_clusters):
-    """Lowest and highest extent (``X -+ R``) of each cluster along each axis, ``(M, d)`` each."""
+def wall_overruns(X, R, cluster, box_length):
+    """The spheres reaching past a wall: one row per sphere and axis, ``(cluster, axis)`` and
+    ``(low, high)`` with ``low = X - R`` if below 0 (else inf) and ``high = X + R`` if above
+    ``L`` (else -inf)."""
     n, d = X.shape
-    low = np.full((n_clusters, d), np.inf)
-    high = np.full((n_clusters, d), -np.inf)
+    count = 0
     for i in range(n):
-        c = cluster[i]
         for a in range(d):
-            low[c, a] = min(low[c, a], X[i, a] - R[i])
-            high[c, a] = max(high[c, a], X[i, a] + R[i])
-    return low, high
+            if X[i, a] - R[i] < 0.0 or X[i, a] + R[i] > box_length:
+                count += 1
+    where = np.empty((count, 2), dtype=np.int64)
+    extent = np.empty((count, 2))
+    count = 0
+    for i in range(n):
+        for a in range(d):
+            low, high = X[i, a] - R[i], X[i, a] + R[i]
+            if low < 0.0 or high > box_length:
+                where[count, 0] = cluster[i]
+                where[count, 1] = a
+                extent[count, 0] = low if low < 0.0 else np.inf
+                extent[count, 1] = high if high > box_length else -np.inf
+                count += 1
+    return where, extent
+
+
+def reflections(where, extent, box_length):
+    """Item (ii): every cluster reaching past a wall is mirrored across it as a whole (its
+    extreme sphere then lies as far inside as it was outside) and its velocity component
+    normal to the wall points inwards; the lower wall wins if a cluster reaches past both.
+
+    ``where``, ``extent`` are the rows of :func:`wall_overruns` (of all processes).  Returns
+    ``(where, shift, sign)``: one row per reflected cluster and axis, the displacement along
+    that axis and the sign of the new velocity component.
+    """
+    if where.shape[0] == 0:
+        return where, np.empty(0), np.empty(0)
+    keys, group = np.unique(where, axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    low = np.full(keys.shape[0], np.inf)
+    high = np.full(keys.shape[0], -np.inf)
+    np.minimum.at(low, group, extent[:, 0])
+    np.maximum.at(high, group, extent[:, 1])
+    below = low < 0.0
+    shift = np.where(below, -2.0 * low, -2.0 * (high - box_length))
+    return keys, shift, np.where(below, 1.0, -1.0)
 
 
 @jit
-def reflect_at_walls(X, V, R, cluster, n_clusters, box_length):
-    """Reflect every cluster that has a sphere outside ``[0, L]^d`` back into the box.
-
-    A cluster reaching past a wall is mirrored across it as a whole (its extreme sphere
-    then lies as far inside as it was outside) and its velocity component normal to the
-    wall points inwards.  Returns the number of reflections.
-    """
+def apply_reflections(X, V, cluster, where, shift, sign):
+    """Move and turn every sphere of the reflected clusters (rows of :func:`reflections`)."""
     n, d = X.shape
-    low, high = cluster_bounds(X, R, cluster, n_clusters)
-    shift = np.zeros((n_clusters, d))
-    flip = np.zeros((n_clusters, d), dtype=np.int8)  # +1: move up, -1: move down
-    count = 0
-    for c in range(n_clusters):
-        for a in range(d):
-            if low[c, a] < 0.0:
-                shift[c, a] = -2.0 * low[c, a]
-                flip[c, a] = 1
-                count += 1
-            elif high[c, a] > box_length:
-                shift[c, a] = -2.0 * (high[c, a] - box_length)
-                flip[c, a] = -1
-                count += 1
-    if count == 0:
-        return 0
+    keys = where[:, 0] * d + where[:, 1]  # ascending: the rows are sorted by (cluster, axis)
     for i in range(n):
-        c = cluster[i]
         for a in range(d):
-            if flip[c, a] != 0:
-                X[i, a] += shift[c, a]
-                V[i, a] = flip[c, a] * abs(V[i, a])
-    return count
+            r = np.searchsorted(keys, cluster[i] * d + a)
+            if r < keys.shape[0] and keys[r] == cluster[i] * d + a:
+                X[i, a] += shift[r]
+                V[i, a] = sign[r] * abs(V[i, a])
 
 
 @jit
@@ -101,15 +117,26 @@ def involved_spheres(cluster, n_clusters, pairs):
 
 
 @jit
-def mass_weighted_velocities(V, masses, labels, n_clusters):
-    """Eq. 2.9: each cluster moves with the mass-weighted mean velocity of its spheres."""
+def cluster_momenta(V, masses, labels, merged):
+    """Mass and momentum of each cluster in ``merged`` (sorted labels) over the given spheres,
+    ``(len(merged), d + 1)``: the sums of eq. 2.9, summed in sphere order."""
     n, d = V.shape
-    momentum = np.zeros((n_clusters, d))
-    mass = np.zeros(n_clusters)
+    sums = np.zeros((merged.shape[0], d + 1))
     for i in range(n):
-        mass[labels[i]] += masses[i]
-        for a in range(d):
-            momentum[labels[i], a] += masses[i] * V[i, a]
+        c = np.searchsorted(merged, labels[i])
+        if c < merged.shape[0] and merged[c] == labels[i]:
+            sums[c, 0] += masses[i]
+            for a in range(d):
+                sums[c, a + 1] += masses[i] * V[i, a]
+    return sums
+
+
+@jit
+def set_cluster_velocities(V, labels, merged, sums):
+    """Eq. 2.9: each sphere of a ``merged`` cluster moves with its cluster's momentum / mass."""
+    n, d = V.shape
     for i in range(n):
-        for a in range(d):
-            V[i, a] = momentum[labels[i], a] / mass[labels[i]]
+        c = np.searchsorted(merged, labels[i])
+        if c < merged.shape[0] and merged[c] == labels[i]:
+            for a in range(d):
+                V[i, a] = sums[c, a + 1] / sums[c, 0]

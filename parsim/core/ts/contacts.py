@@ -71,25 +71,26 @@ def cross_cluster_contacts(X, R, cluster, side, k):
 
 
 @jit
-def _unlinked_sorted(pairs, link_head, link_next, link_to):
-    """The pairs that are not linked, each written ``(min, max)``."""
+def _unlinked(pairs, global_id, link_head, link_next, link_to):
+    """The pairs whose spheres (named by ``global_id``) are not linked."""
     kept = np.empty_like(pairs)
     count = 0
     for p in range(pairs.shape[0]):
         i, j = pairs[p, 0], pairs[p, 1]
-        if not are_linked(link_head, link_next, link_to, i, j):
-            kept[count, 0] = min(i, j)
-            kept[count, 1] = max(i, j)
+        if not are_linked(link_head, link_next, link_to, global_id[i], global_id[j]):
+            kept[count, 0] = i
+            kept[count, 1] = j
             count += 1
     return kept[:count].copy()
 
 
-def unlinked_contacts(X, R, moved, side, k, link_head, link_next, link_to):
-    """Pairs ``(min, max)`` in contact with at least one sphere in ``moved`` that are not linked
-    (eq. 3.2); a pair of two moved spheres is reported once."""
+def unlinked_contacts(X, R, moved, side, k, global_id, link_head, link_next, link_to):
+    """Pairs of rows in contact with at least one row in ``moved`` whose spheres are not linked
+    (eq. 3.2); a pair of two moved rows is reported once.  Row ``i`` is sphere
+    ``global_id[i]`` of the link set."""
     n = X.shape[0]
     touching = _near_pairs(X, R, moved, np.arange(n), 0.0, side, k)
-    return _unlinked_sorted(touching, link_head, link_next, link_to)
+    return _unlinked(touching, global_id, link_head, link_next, link_to)
 
 
 def candidate_pairs(P, R, n_moving, reach):

@@ -138,17 +138,21 @@ class Outcome:
     max_step: float  #: largest displacement of the last iteration (3.27)
     finite: bool
     multipliers: np.ndarray  #: lambda of each candidate pair of the problem at the end
+    left_halo: bool = False  #: a sphere moved farther than the exchange's ``margin`` (decomposed runs)
 
 
 class SerialExchange:
     """The halo interface of the minimiser on one process: every call is a no-op.
 
-    A decomposed run passes an object with the same three methods: ``exchange``
-    refreshes the anchor (halo) rows of a positions array from their owners, ``sum``
-    and ``max`` reduce a float over all parts of the problem.
+    A decomposed run passes an object with the same members: ``share(values)`` overwrites,
+    in place, the ghost rows (from ``problem.first_ghost`` on) of a per-member array with
+    their owners' rows; ``sum`` and ``max`` reduce a float over all parts of the problem;
+    ``margin`` is how far a sphere may move from where the ghosts were chosen.
     """
 
-    def exchange(self, positions):
+    margin = math.inf
+
+    def share(self, values):
         return None
 
     def sum(self, value):
@@ -244,11 +248,8 @@ def _constraint_values_near(P, R, awake, pair_ptr, pair_of, pair_a, pair_b, phi)
 
 
 @jit
-def _wake_partners(i, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, woken, count):
-    """Wake the moving partners (links and candidate pairs) of sphere ``i``; returns the new count.
-    The waking is written out twice: a jitted helper for it made a sleeping
-    minimisation 12 % slower."""
-    n_moving = is_awake.shape[0]
+def _wake_partners(i, n_moving, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, woken, count):
+    """Wake the moving partners (links and candidate pairs) of sphere ``i``; returns the new count."""
     for e in range(link_ptr[i], link_ptr[i + 1]):
         j = link_to[e]
         if j < n_moving and not is_awake[j]:
@@ -266,39 +267,69 @@ def _wake_partners(i, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pa
 
 
 @jit
-def _spread(P, previous, awake, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, tolerance):
+def _wake_ghost_partners(g, first_ghost, is_awake, ghost_ptr, ghost_partner, woken, count):
+    """Wake the local moving partners of ghost row ``first_ghost + g``; returns the new count."""
+    for e in range(ghost_ptr[g], ghost_ptr[g + 1]):
+        j = ghost_partner[e]
+        if not is_awake[j]:
+            is_awake[j] = True
+            woken[count] = j
+            count += 1
+    return count
+
+
+@jit
+def _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, link_ptr, link_to, pair_ptr,
+            pair_of, pair_a, pair_b, ghost_ptr, ghost_partner, tolerance):
     """The awake spheres after a partial iteration: those awake, and the partners of those
-    that moved more than ``tolerance`` (a disturbance travels one contact per iteration)."""
-    woken = np.empty(is_awake.shape[0], dtype=np.int64)
+    (moving ghosts included) that moved more than ``tolerance`` (a disturbance travels one
+    contact per iteration)."""
+    woken = np.empty(n_moving, dtype=np.int64)
     count = 0
     for i in awake:
         if _distance_sq(P, i, previous, i) > tolerance * tolerance:
-            count = _wake_partners(i, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, woken, count)
+            count = _wake_partners(i, n_moving, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b,
+                                   woken, count)
+    for g in range(ghost_ptr.shape[0] - 1):
+        if ghost_ptr[g + 1] > ghost_ptr[g] and _distance_sq(P, first_ghost + g, previous_ghost, g) > tolerance**2:
+            count = _wake_ghost_partners(g, first_ghost, is_awake, ghost_ptr, ghost_partner, woken, count)
     if count == 0:
         return awake
     return np.sort(np.concatenate((awake, woken[:count])))
 
 
 @jit
-def _settle(P, previous, U, phi, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, tolerance,
-            restless_phi):
-    """After a full sweep: spheres that moved more than ``tolerance`` or overlap a partner by
-    more than ``sqrt(restless_phi)``, and their partners, stay awake; the others sleep, at
-    rest, with their pairs' multipliers, until a partner moves.  Returns the awake spheres."""
+def _restless(P, previous, phi, pair_ptr, pair_of, tolerance, restless_phi, restless):
+    """After a full sweep: a moving sphere is restless if it moved more than ``tolerance`` or
+    overlaps a partner by more than ``sqrt(restless_phi)``."""
+    for i in range(previous.shape[0]):
+        moved = _distance_sq(P, i, previous, i) > tolerance * tolerance
+        for e in range(pair_ptr[i], pair_ptr[i + 1]):
+            moved = moved or phi[pair_of[e]] > restless_phi
+        restless[i] = moved
+
+
+@jit
+def _settle(restless, U, is_awake, first_ghost, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, ghost_ptr,
+            ghost_partner):
+    """The restless spheres (ghost rows: restless on their owner) and their partners stay
+    awake; the others sleep, at rest, with their pairs' multipliers, until a partner moves.
+    Returns the awake moving spheres."""
     n_moving = U.shape[0]
     is_awake[:] = False
     woken = np.empty(n_moving, dtype=np.int64)
     count = 0
     for i in range(n_moving):
-        restless = _distance_sq(P, i, previous, i) > tolerance * tolerance
-        for e in range(pair_ptr[i], pair_ptr[i + 1]):
-            restless = restless or phi[pair_of[e]] > restless_phi
-        if restless:
+        if restless[i]:
             if not is_awake[i]:
                 is_awake[i] = True
                 woken[count] = i
                 count += 1
-            count = _wake_partners(i, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, woken, count)
+            count = _wake_partners(i, n_moving, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b,
+                                   woken, count)
+    for g in range(ghost_ptr.shape[0] - 1):
+        if restless[first_ghost + g]:
+            count = _wake_ghost_partners(g, first_ghost, is_awake, ghost_ptr, ghost_partner, woken, count)
     for i in range(n_moving):
         if not is_awake[i]:
             for k in range(U.shape[1]):
@@ -307,16 +338,17 @@ def _settle(P, previous, U, phi, is_awake, link_ptr, link_to, pair_ptr, pair_of,
 
 
 @jit
-def _measure(phi, P, previous, link_ptr, pair_ptr, pair_of, sphere_overlap):
-    """Overlap sum over pairs (3.28), deepest overlap, mean overlap per moving sphere,
-    largest step (3.27)."""
+def _measure(phi, counted, P, previous, link_ptr, pair_ptr, pair_of, sphere_overlap):
+    """Overlap sum over the ``counted`` pairs (3.28), deepest overlap, mean overlap per moving
+    sphere, largest step (3.27)."""
     total = 0.0
     overlapping = 0
     deepest = 0.0
     for p in range(phi.shape[0]):
         if phi[p] > 0.0:
-            total += math.sqrt(phi[p])
-            overlapping += 1
+            if counted[p]:
+                total += math.sqrt(phi[p])
+                overlapping += 1
             deepest = max(deepest, phi[p])
     for i in range(previous.shape[0]):
         s = 0.0
@@ -340,31 +372,39 @@ def _largest_step(P, previous):
 @jit
 def _update_multipliers(phi, pair_a, pair_b, lam, rate, damping_of, stable):
     """Eq. 3.24 (3.31 in the almost-rigid form: the pairs are the tile's), the rate kept below
-    ``stable`` times the smaller damping of the pair's moving spheres.  The step is written
-    out here and in :func:`_update_multipliers_near`: a shared jitted helper made a large
-    minimisation 1.5x slower."""
-    n_moving = damping_of.shape[0]
+    ``stable`` times the smaller damping of the pair's moving spheres (``damping_of`` is
+    infinite on anchors).  The step is written out here and in the two kernels below: a
+    shared jitted helper made a large minimisation 1.5x slower."""
     for p in range(pair_a.shape[0]):
-        c = damping_of[pair_a[p]]
-        if pair_b[p] < n_moving:
-            c = min(c, damping_of[pair_b[p]])
+        c = min(damping_of[pair_a[p]], damping_of[pair_b[p]])
         value = lam[p] + min(rate, stable * c) * phi[p]
         lam[p] = value if value > 0.0 else 0.0
 
 
 @jit
-def _update_multipliers_near(phi, awake, is_awake, pair_ptr, pair_of, pair_a, pair_b, lam, rate, damping_of, stable):
+def _update_multipliers_near(phi, awake, is_awake, n_moving, pair_ptr, pair_of, pair_a, pair_b, lam, rate, damping_of,
+                             stable):
     """Eq. 3.24 on the pairs with an awake end, each once; the pairs of two sleeping spheres sleep too."""
-    n_moving = damping_of.shape[0]
     for i in awake:
         for e in range(pair_ptr[i], pair_ptr[i + 1]):
             p = pair_of[e]
             j = pair_b[p] if pair_a[p] == i else pair_a[p]
             if j < n_moving and is_awake[j] and j < i:
                 continue  # updated from its other end, j
-            c = damping_of[i]
-            if j < n_moving:
-                c = min(c, damping_of[j])
+            c = min(damping_of[i], damping_of[j])
+            value = lam[p] + min(rate, stable * c) * phi[p]
+            lam[p] = value if value > 0.0 else 0.0
+
+
+@jit
+def _update_cross_pairs_near(P, R, cross_pairs, pair_a, pair_b, is_awake, phi, lam, rate, damping_of, stable):
+    """``phi`` and eq. 3.24 on the cross pairs whose local end sleeps and whose ghost end is
+    awake on its owner (the pairs with an awake local end were updated from it)."""
+    for p in cross_pairs:
+        a, g = pair_a[p], pair_b[p]
+        if is_awake[g] and not is_awake[a]:
+            phi[p] = _phi(P, R, a, g)
+            c = min(damping_of[a], damping_of[g])
             value = lam[p] + min(rate, stable * c) * phi[p]
             lam[p] = value if value > 0.0 else 0.0
 
@@ -403,12 +443,15 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     is the halo interface (:class:`SerialExchange` by default).  ``on_iteration(r,
     problem)``, if given, is called after every iteration (a test hook).  Moving
     positions are updated in ``problem.positions``.  Stops early, with
-    ``finite=False``, at the first full sweep after a position becomes non-finite.
+    ``finite=False``, at the first full sweep after a position becomes non-finite, and with
+    ``left_halo=True`` when a sphere moved farther than ``exchange.margin``.
     """
     exchange = exchange or SerialExchange()
     P, R = problem.positions, problem.radii
-    built_at = P[:problem.n_moving].copy()
+    start = P[:problem.n_moving].copy()
+    built_at = start.copy()
     n_moving, d = problem.n_moving, P.shape[1]
+    first_ghost = problem.first_ghost
     delta = params.step
     floor = OVERLAP_FLOOR * params.overlap_tolerance
     U = np.zeros((n_moving, d))
@@ -417,11 +460,12 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
         known = np.isfinite(multipliers)
         lam[known] = multipliers[known]
     sphere_overlap = np.zeros(n_moving)
-    previous = P[:n_moving].copy()
+    previous = start.copy()
+    previous_ghost = P[first_ghost:].copy()
     phi = np.empty(problem.pair_a.size)
     _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
-    total, overlapping, _, _ = _measure(phi, P, previous, problem.link_ptr, problem.pair_ptr, problem.pair_of,
-                                        sphere_overlap)
+    total, overlapping, _, _ = _measure(phi, problem.pair_counted, P, previous, problem.link_ptr, problem.pair_ptr,
+                                        problem.pair_of, sphere_overlap)
     n_links = exchange.sum(float(problem.n_links))
     n_spheres = exchange.sum(float(n_moving))
     total = exchange.sum(total)
@@ -429,18 +473,22 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
     range_sq = attraction_range**2 if math.isfinite(attraction_range) else math.inf
     new = np.empty((n_moving, d))
-    damping_of = np.full(n_moving, params.damping)
+    damping_of = np.where(problem.moving_ghost, params.damping, math.inf)  # anchors never limit a rate
+    damping_of[:n_moving] = params.damping
     stable = delta * STABILITY_MARGIN * params.penalty / (2.0 * params.attraction)
     largest = deepest = math.inf
     everyone = np.arange(n_moving)
     awake = everyone
-    is_awake = np.ones(n_moving, dtype=np.bool_)
+    is_awake = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghost rows as on their owner
+    restless = np.zeros(P.shape[0], dtype=np.bool_)
     sleep = params.sleep_tolerance
     iteration = 0
     while iteration < params.max_iterations:
         guarded = max(typical_overlap, floor)
         full = sleep == 0.0 or iteration % FULL_SWEEP_EVERY == 0
-        if _largest_step(P, built_at) > 0.5 * problem.reach:  # a pair may have come within reach
+        if exchange.max(_largest_step(P, built_at)) > 0.5 * problem.reach:  # a pair may have come within reach
+            if exchange.max(_largest_step(P, start)) + 0.5 * problem.reach > exchange.margin:
+                return Outcome(False, iteration, mean_overlap, deepest, largest, True, lam, left_halo=True)
             lam = problem.refresh_pairs(lam)
             phi = np.empty(problem.pair_a.size)
             built_at[:] = P[:n_moving]
@@ -448,13 +496,16 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
         if full:
             awake = everyone
         previous[:] = P[:n_moving]
+        previous_ghost[:] = P[first_ghost:]
         _drift(P, U, awake, 0.5 * delta)
-        exchange.exchange(P)
+        exchange.share(P)
         _kick_damp_drift(P, U, R, awake, problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of,
                          problem.pair_a, problem.pair_b, lam, sphere_overlap, guarded, params.dynamic, delta,
                          params.attraction, params.penalty, params.damping, range_sq, new, damping_of)
         _accept(P, new, awake)
-        exchange.exchange(P)
+        exchange.share(P)
+        if params.dynamic:
+            exchange.share(damping_of)
         rate = delta * params.multiplier_rate * (math.sqrt(n_spheres) / guarded if params.dynamic else 1.0)
         if full:
             _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
@@ -462,17 +513,21 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
         else:
             _constraint_values_near(P, R, awake, problem.pair_ptr, problem.pair_of, problem.pair_a, problem.pair_b,
                                     phi)
-            _update_multipliers_near(phi, awake, is_awake, problem.pair_ptr, problem.pair_of, problem.pair_a,
-                                     problem.pair_b, lam, rate, damping_of, stable)
+            _update_multipliers_near(phi, awake, is_awake, n_moving, problem.pair_ptr, problem.pair_of,
+                                     problem.pair_a, problem.pair_b, lam, rate, damping_of, stable)
+            _update_cross_pairs_near(P, R, problem.cross_pairs, problem.pair_a, problem.pair_b, is_awake, phi, lam,
+                                     rate, damping_of, stable)
         iteration += 1
         if on_iteration is not None:
             on_iteration(iteration, problem)
-        graph = (problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of, problem.pair_a, problem.pair_b)
+        graph = (problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of, problem.pair_a, problem.pair_b,
+                 problem.ghost_ptr, problem.ghost_partner)
         if not full:
-            awake = _spread(P, previous, awake, is_awake, *graph, sleep)
+            awake = _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, *graph, sleep)
+            exchange.share(is_awake)
             continue
-        total, overlapping, deepest, largest = _measure(phi, P, previous, problem.link_ptr, problem.pair_ptr,
-                                                        problem.pair_of, sphere_overlap)
+        total, overlapping, deepest, largest = _measure(phi, problem.pair_counted, P, previous, problem.link_ptr,
+                                                        problem.pair_ptr, problem.pair_of, sphere_overlap)
         total = exchange.sum(total)
         mean_overlap = total / max(n_links, 1.0)
         typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
@@ -484,5 +539,9 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
                 and deepest <= params.max_overlap_tolerance):
             return Outcome(True, iteration, mean_overlap, deepest, largest, True, lam)
         if sleep > 0.0:
-            awake = _settle(P, previous, U, phi, is_awake, *graph, sleep, params.overlap_tolerance**2)
+            _restless(P, previous, phi, problem.pair_ptr, problem.pair_of, sleep, params.overlap_tolerance**2,
+                      restless)
+            exchange.share(restless)
+            awake = _settle(restless, U, is_awake, first_ghost, *graph)
+            exchange.share(is_awake)
     return Outcome(False, iteration, mean_overlap, deepest, largest, True, lam)

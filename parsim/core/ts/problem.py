@@ -1,4 +1,12 @@
-"""Assemble one DAHA minimisation (:class:`parsim.core.ts.daha.Problem`) from the global state."""
+"""Assemble one DAHA minimisation (:class:`Problem`) from the spheres of one process.
+
+On one process the problem holds the moving spheres and the anchors.  In a decomposed run
+(:mod:`parsim.parallel.tiled`) it also holds *ghost* rows: spheres owned by other ranks, read
+like anchors, refreshed from their owners by the minimiser's exchange.  A ghost that moves on
+its owner is a *moving ghost*; its pairs and links with this rank's moving spheres are
+*cross* pairs and links, held by both ranks (each computes the same multiplier from the same
+positions) and counted in the sums of (3.28) by the rank owning the lower global id.
+"""
 
 from dataclasses import dataclass
 
@@ -10,14 +18,28 @@ from parsim.core.ts.links import link_index
 
 
 @dataclass
+class Ghosts:
+    """Rows of spheres owned elsewhere: positions ``(g, d)``, radii, global ids, and whether
+    each one moves on its owner."""
+
+    positions: np.ndarray
+    radii: np.ndarray
+    global_id: np.ndarray
+    moving: np.ndarray
+
+
+@dataclass
 class Problem:
     """One minimisation: local sphere ``k`` is global sphere ``members[k]``.
 
-    The first ``n_moving`` members move; the rest are anchors.  Links and candidate
-    pairs are stored per moving sphere in CSR form (``*_ptr`` of length
-    ``n_moving + 1``); ``pair_a < pair_b`` are local indices, ``pair_of`` lists the
-    pairs incident to each moving sphere, ``link_to`` its linked partners.  Candidate
-    pairs are those with a gap of at most ``reach``; :meth:`refresh_pairs` recomputes them.
+    The first ``n_moving`` members move; the rest are anchors, the ghost rows from
+    ``first_ghost`` on (none on one process).  Links and candidate pairs are stored per
+    moving sphere in CSR form (``*_ptr`` of length ``n_moving + 1``); ``pair_a < pair_b``
+    are local indices, ``pair_of`` lists the pairs incident to each moving sphere,
+    ``link_to`` its linked partners.  Candidate pairs are those with a gap of at most
+    ``reach``; :meth:`refresh_pairs` recomputes them and the cross-pair bookkeeping:
+    ``pair_counted`` (the pairs this process counts in sums), ``cross_pairs``, and per
+    moving ghost its local moving partners (``ghost_ptr``, ``ghost_partner``).
     """
 
     members: np.ndarray
@@ -26,12 +48,18 @@ class Problem:
     radii: np.ndarray
     link_ptr: np.ndarray
     link_to: np.ndarray
-    n_links: int  #: distinct links with a moving end, the #S of (3.28)
+    n_links: int  #: distinct links with a moving end, the #S of (3.28), counted once over processes
     reach: float
+    first_ghost: int
+    moving_ghost: np.ndarray  #: per member, True for a ghost row that moves on its owner
     pair_a: np.ndarray = None
     pair_b: np.ndarray = None
     pair_ptr: np.ndarray = None
     pair_of: np.ndarray = None
+    pair_counted: np.ndarray = None
+    cross_pairs: np.ndarray = None
+    ghost_ptr: np.ndarray = None
+    ghost_partner: np.ndarray = None
 
     def refresh_pairs(self, multipliers=None):
         """Recompute the candidate pairs at the current positions; returns their multipliers
@@ -39,6 +67,12 @@ class Problem:
         old_keys = None if self.pair_a is None else self.pair_a * self.positions.shape[0] + self.pair_b
         self.pair_a, self.pair_b = candidate_pairs(self.positions, self.radii, self.n_moving, self.reach)
         self.pair_ptr, self.pair_of = incidence(self.pair_a, self.pair_b, self.n_moving)
+        crossing = self.moving_ghost[self.pair_b]  # pair_a < n_moving <= pair_b for these
+        self.cross_pairs = np.flatnonzero(crossing)
+        self.pair_counted = ~(crossing & (self.members[self.pair_b] < self.members[self.pair_a]))
+        self.ghost_ptr, self.ghost_partner = _ghost_partners(self.pair_a, self.pair_b, self.cross_pairs,
+                                                             self.link_ptr, self.link_to, self.moving_ghost,
+                                                             self.first_ghost)
         kept = np.zeros(self.pair_a.size)
         if multipliers is not None and old_keys.size:
             keys = self.pair_a * self.positions.shape[0] + self.pair_b
@@ -61,8 +95,38 @@ def _pair_links(members, pair_a, pair_b, head, nxt, to):
 
 
 @jit
-def _local_links(members, n_moving, local_of, head, nxt, to):
-    """CSR of the linked partners (local indices) of each moving sphere, and #S."""
+def _ghost_partners(pair_a, pair_b, cross_pairs, link_ptr, link_to, moving_ghost, first_ghost):
+    """CSR over the ghost rows of the local moving partners (cross pairs, then cross links)
+    of each moving ghost: who must wake when that ghost moves."""
+    n_ghost = moving_ghost.shape[0] - first_ghost
+    ptr = np.zeros(n_ghost + 1, dtype=np.int64)
+    for p in cross_pairs:
+        ptr[pair_b[p] - first_ghost + 1] += 1
+    for i in range(link_ptr.shape[0] - 1):
+        for e in range(link_ptr[i], link_ptr[i + 1]):
+            if moving_ghost[link_to[e]]:
+                ptr[link_to[e] - first_ghost + 1] += 1
+    for g in range(n_ghost):
+        ptr[g + 1] += ptr[g]
+    fill = ptr[:-1].copy()
+    partner = np.empty(ptr[n_ghost], dtype=np.int64)
+    for p in cross_pairs:
+        g = pair_b[p] - first_ghost
+        partner[fill[g]] = pair_a[p]
+        fill[g] += 1
+    for i in range(link_ptr.shape[0] - 1):
+        for e in range(link_ptr[i], link_ptr[i + 1]):
+            if moving_ghost[link_to[e]]:
+                g = link_to[e] - first_ghost
+                partner[fill[g]] = i
+                fill[g] += 1
+    return ptr, partner
+
+
+@jit
+def _local_links(members, n_moving, local_of, head, nxt, to, moving_ghost):
+    """CSR of the linked partners (local indices) of each moving sphere, and #S (a link to a
+    moving ghost is counted by the process holding its lower global id)."""
     ptr = np.zeros(n_moving + 1, dtype=np.int64)
     for i in range(n_moving):
         slot = head[members[i]]
@@ -82,26 +146,41 @@ def _local_links(members, n_moving, local_of, head, nxt, to):
             if j >= 0:
                 partners[e] = j
                 e += 1
-                if j > i:  # a moving-moving link is listed twice, a moving-anchor link once
+                # a moving-moving link is listed at both ends, a moving-anchor link once
+                if j > i and not (moving_ghost[j] and members[j] < members[i]):
                     distinct += 1
             slot = nxt[slot]
     return ptr, partners, distinct
 
 
-def build_problem(X, R, moving, anchors, links, reach, local_of):
-    """The minimisation of the ``moving`` spheres with ``anchors`` fixed.
+def build_problem(X, R, moving, anchors, links, reach, local_of, global_id=None, ghosts=None):
+    """The minimisation of the rows ``moving`` of ``X`` with the rows ``anchors`` (and the
+    ``ghosts``, if any) fixed.
 
-    ``reach`` is the largest gap of a constraint candidate pair; ``local_of``
-    is scratch of length ``n`` filled with -1, returned filled with -1.
+    ``global_id`` names the rows of ``X`` and ``R`` (default: row ``i`` is sphere ``i``);
+    ``links`` are between global ids.  ``reach`` is the largest gap of a constraint
+    candidate pair; ``local_of`` is scratch over the global ids filled with -1, returned so.
     """
-    members = np.concatenate([moving, anchors])
+    own = np.concatenate([moving, anchors])
+    rows = [X[own]]
+    radii = [R[own]]
+    members = [own if global_id is None else global_id[own]]
+    if ghosts is not None:
+        rows.append(ghosts.positions)
+        radii.append(ghosts.radii)
+        members.append(ghosts.global_id)
+    members = np.concatenate(members)
+    moving_ghost = np.zeros(members.size, dtype=np.bool_)
+    if ghosts is not None:
+        moving_ghost[own.size:] = ghosts.moving
     local_of[members] = np.arange(members.size)
     try:
-        link_ptr, link_to, n_links = _local_links(members, moving.size, local_of, links.head, links.next, links.to)
+        link_ptr, link_to, n_links = _local_links(members, moving.size, local_of, links.head, links.next, links.to,
+                                                  moving_ghost)
     finally:
         local_of[members] = -1
-    problem = Problem(members=members, n_moving=int(moving.size), positions=X[members].copy(),
-                      radii=R[members].copy(), link_ptr=link_ptr, link_to=link_to, n_links=int(n_links),
-                      reach=float(reach))
+    problem = Problem(members=members, n_moving=int(moving.size), positions=np.concatenate(rows),
+                      radii=np.concatenate(radii), link_ptr=link_ptr, link_to=link_to, n_links=int(n_links),
+                      reach=float(reach), first_ghost=int(own.size), moving_ghost=moving_ghost)
     problem.refresh_pairs()
     return problem

@@ -16,7 +16,6 @@ import numpy as np
 
 from parsim.core.celllist import block_cells, build_cells, neighbour_offsets
 from parsim.core.jit import jit
-from parsim.core.ts.clusters import cluster_bounds
 
 #: Relative safety margin on every bound, far above round-off.
 MARGIN = 1e-9
@@ -70,33 +69,33 @@ def _steps_before_contact(X, V, R, cluster, queries, dt, fastest, horizon, side,
 
 
 @jit
-def _steps_before_wall(X, V, R, cluster, n_clusters, box_length, dt):
-    """Steps during which no cluster gets a sphere outside ``[0, L]^d`` (no reflection)."""
-    low, high = cluster_bounds(X, R, cluster, n_clusters)
-    velocity = np.zeros_like(low)
-    for i in range(X.shape[0]):
-        velocity[cluster[i]] = V[i]  # one velocity per cluster (eq. 2.9)
+def _steps_before_wall(X, V, R, rows, box_length, dt):
+    """Steps during which none of the spheres ``rows`` gets outside ``[0, L]^d`` (no reflection).
+    Sphere by sphere: the minimum over a cluster's spheres is the cluster's bound."""
     steps = math.inf
-    for c in range(n_clusters):
+    for i in rows:
         for a in range(X.shape[1]):
-            if velocity[c, a] < 0.0:
-                steps = min(steps, _steps_before(low[c, a], -velocity[c, a] * dt))
-            elif velocity[c, a] > 0.0:
-                steps = min(steps, _steps_before(box_length - high[c, a], velocity[c, a] * dt))
+            if V[i, a] < 0.0:
+                steps = min(steps, _steps_before(X[i, a] - R[i], -V[i, a] * dt))
+            elif V[i, a] > 0.0:
+                steps = min(steps, _steps_before(box_length - (X[i, a] + R[i]), V[i, a] * dt))
     return steps
 
 
-def quiet_steps(X, V, R, cluster, n_clusters, box_length, dt, fastest, horizon, side, k):
+def quiet_steps(X, V, R, cluster, n_owned, largest, box_length, dt, fastest, horizon, side, k):
     """How many of the next time steps of length ``dt`` can make no contact and no wall
-    reflection (a float, possibly ``inf``); see the module docstring.
+    reflection (a float, possibly ``inf``) for the first ``n_owned`` rows; see the module
+    docstring.  The other rows are ghosts (spheres of other processes within ``2 max R +
+    horizon``), read as partners only; the caller takes the minimum over processes.
 
-    ``fastest`` is ``max |V_i|``; ``horizon`` the gap up to which pairs are examined one by
-    one; the cell grid (``k`` per side of length ``side``) must have
+    ``fastest`` is ``max |V_i|`` over all spheres; ``horizon`` the gap up to which pairs are
+    examined one by one; the cell grid (``k`` per side of length ``side``) must have
     ``side >= 2 max R + horizon``.  Every pair of different clusters has an end outside the
-    largest cluster, so the pairs are searched from those spheres (in the late stage, a few).
+    ``largest`` cluster, so the pairs are searched from those spheres (in the late stage, a few).
     """
-    walls = _steps_before_wall(X, V, R, cluster, n_clusters, box_length, dt)
+    owned = np.arange(n_owned)
+    walls = _steps_before_wall(X, V, R, owned, box_length, dt)
     if walls == 0.0:
         return 0.0
-    queries = np.flatnonzero(cluster != np.bincount(cluster, minlength=n_clusters).argmax())
+    queries = np.flatnonzero(cluster[:n_owned] != largest)
     return min(walls, _steps_before_contact(X, V, R, cluster, queries, dt, fastest, horizon, side, k))

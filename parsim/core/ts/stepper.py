@@ -24,6 +24,12 @@ moves and every link attracts (eq. 3.5).  ``"almost_rigid"`` (section 3.3): only
 interacting spheres in the tiles holding a new link move, those in the surrounding
 tiles are read as fixed anchors, and a link attracts only while its length is at most
 ``Delta_W`` (eq. 3.30, 3.31); see :mod:`parsim.core.ts.tiles`.
+
+Processes.  The run holds the rows of the spheres its process owns and reaches the others
+through a domain (:mod:`parsim.core.ts.domain`): on one process it owns everything; with
+:class:`parsim.parallel.tiled.DecomposedDomain` each MPI rank owns the spheres of its
+sub-box and reads its neighbours' as ghosts.  Links are made in sorted order, so the same
+links come out on any number of processes.
 """
 
 import math
@@ -32,13 +38,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from parsim.core.celllist import grid_size
-from parsim.core.ts.clusters import involved_spheres, mass_weighted_velocities, merge_clusters, reflect_at_walls
+from parsim.core.ts.clusters import (apply_reflections, cluster_momenta, involved_spheres, merge_clusters,
+                                     reflections, set_cluster_velocities, wall_overruns)
 from parsim.core.ts.contacts import cross_cluster_contacts, unlinked_contacts
 from parsim.core.ts.daha import DahaParameters, minimise
+from parsim.core.ts.domain import SerialDomain
 from parsim.core.ts.links import LinkSet
-from parsim.core.ts.problem import build_problem
+from parsim.core.ts.problem import Ghosts, build_problem
 from parsim.core.ts.quiet import quiet_steps
-from parsim.core.ts.tiles import select_spheres, tiles_per_side
+from parsim.core.ts.tiles import seed_tiles, select_spheres, tiles_per_side
 
 FORMULATIONS = ("almost_rigid", "non_rigid")
 STOP_REASONS = ("single_cluster", "max_time", "max_steps")
@@ -46,6 +54,10 @@ STOP_REASONS = ("single_cluster", "max_time", "max_steps")
 TABLE1_TIME_STEP_FACTORS = (0.005, 0.01, 0.015)
 #: Gap (in mean radii) below which two interacting spheres get a constraint multiplier.
 CANDIDATE_REACH = 1.0
+#: How far (in largest radii) a sphere may first move in one minimisation of a decomposed run
+#: (the halo is that much wider on both sides); a minimisation that goes farther is run again
+#: from its start with the margin doubled, which gives the same result.
+HALO_MARGIN = 2.0
 #: Rounds of steps 2c-2d in one time step before it is reported as not settling.
 MAX_LINK_ROUNDS = 1000
 #: The quiet-step search examines pairs up to the gap the fastest pair closes in this many steps
@@ -74,6 +86,7 @@ class TSResult:
     stop_reason: str
     cluster_history: np.ndarray = field(repr=False)  #: M after each time step
     time_history: np.ndarray = field(repr=False)  #: t after each time step
+    imbalance: np.ndarray = field(repr=False)  #: per searched time step, max / mean work over the ranks
 
 
 def check_formulation(formulation):
@@ -82,12 +95,17 @@ def check_formulation(formulation):
 
 
 class _Run:
-    """The state of one run and the three steps of section 3."""
+    """The state of one run and the three steps of section 3.
 
-    def __init__(self, X, V, R, m, L, formulation, daha, attraction_range, tiles, exchange):
-        self.X, self.V, self.R, self.m, self.L = X, V, R, m, L
+    This process holds the rows of the spheres it owns (``global_id``, ``X``, ``V``); the
+    radii, masses, cluster labels and links of all spheres are known everywhere (they change
+    only through links, which every process learns).
+    """
+
+    def __init__(self, X, V, R, m, L, formulation, daha, attraction_range, tiles, domain):
         n, d = X.shape
-        self.n, self.d = n, d
+        self.n, self.d, self.L = n, d, L
+        self.R_all, self.m_all = R, m
         self.cluster = np.arange(n, dtype=np.int64)
         self.n_clusters = n
         self.links = LinkSet(n)
@@ -95,70 +113,133 @@ class _Run:
         self.daha = daha
         self.attraction_range = attraction_range if formulation == "almost_rigid" else math.inf
         self.tiles = tiles
-        self.exchange = exchange
+        self.domain = domain
         self.reach = CANDIDATE_REACH * float(R.mean())
-        contact = 2.0 * float(R.max())
-        self.grid_k, self.grid_side = grid_size(L, contact, d, n)
-        self.min_tile = max(contact + self.reach, attraction_range if math.isfinite(attraction_range) else 0.0)
+        self.contact = 2.0 * float(R.max())
+        self.grid_k, self.grid_side = grid_size(L, self.contact, d, n)
+        self.min_tile = max(self.contact + self.reach, attraction_range if math.isfinite(attraction_range) else 0.0)
+        self.margin = HALO_MARGIN * float(R.max())
+        self.global_id, self.X, self.V = domain.distribute(X, V, self._problem_width(0.0))
+        self.R = R[self.global_id]
         self.local_of = np.full(n, -1, dtype=np.int64)
         self.n_minimisations = 0
         self.n_iterations = 0
         self.max_iterations = 0
+        self.work = 0.0
         self.horizon_steps = QUIET_HORIZON_STEPS[0]
+
+    def advect(self, dt):
+        """Step 1: free flight, then the whole-cluster wall reflection; returns the reflections made."""
+        self.X += dt * self.V
+        where, extent = wall_overruns(self.X, self.R, self.cluster[self.global_id], self.L)
+        where, shift, sign = reflections(self.domain.gather(where), self.domain.gather(extent), self.L)
+        apply_reflections(self.X, self.V, self.cluster[self.global_id], where, shift, sign)
+        self.global_id, self.X, self.V = self.domain.redistribute(self.global_id, self.X, self.V)
+        self.R = self.R_all[self.global_id]
+        return where.shape[0]
+
+    def fastest(self):
+        local = float(np.sqrt((self.V**2).sum(axis=1)).max()) if self.X.shape[0] else 0.0
+        return self.domain.max(local)
+
+    def _with_ghosts(self, width):
+        """Owned and ghost rows: ``(halo, global ids, positions)``."""
+        halo = self.domain.ghosts(self.X, self.global_id, width)
+        ids = np.concatenate([self.global_id, halo.ghost_global_id])
+        return halo, ids, np.concatenate([self.X, halo.exchange(self.X)])
 
     def quiet_steps(self, dt):
         """How many of the next steps of length ``dt`` certainly make no link and no reflection."""
-        fastest = float(np.sqrt((self.V**2).sum(axis=1)).max())
-        horizon = min(self.horizon_steps * 2.0 * fastest * dt, self.L / 4.0)
-        k, side = grid_size(self.L, 2.0 * float(self.R.max()) + horizon, self.d, self.n)
-        quiet = quiet_steps(self.X, self.V, self.R, self.cluster, self.n_clusters, self.L, dt, fastest, horizon,
-                            side, k)
+        fastest = self.fastest()
+        horizon = min(self.horizon_steps * 2.0 * fastest * dt, self.L / 4.0,
+                      self.domain.max_halo_width - self.contact)
+        halo, ids, X = self._with_ghosts(self.contact + horizon)
+        V = np.concatenate([self.V, halo.exchange(self.V)])
+        k, side = grid_size(self.L, self.contact + horizon, self.d, self.n)
+        largest = np.bincount(self.cluster, minlength=self.n_clusters).argmax()
+        quiet = self.domain.min(quiet_steps(X, V, self.R_all[ids], self.cluster[ids], self.X.shape[0], largest,
+                                            self.L, dt, fastest, horizon, side, k))
         self.horizon_steps = min(2 * self.horizon_steps, QUIET_HORIZON_STEPS[1]) if quiet > 0 else QUIET_HORIZON_STEPS[0]
         return quiet
+
+    def _shared_pairs(self, pairs, ids, n_owned):
+        """Local pairs with an owned end, as global ids ``(min, max)``, from every process:
+        sorted, each once."""
+        pairs = pairs[(pairs < n_owned).any(axis=1)] if pairs.size else pairs.reshape(0, 2)
+        named = np.sort(ids[pairs], axis=1)
+        return np.unique(self.domain.gather(named), axis=0)
+
+    def _problem_width(self, drift):
+        """Halo width of a minimisation: the reach of its pairs and links, twice the margin
+        (both ends move), and ``drift``, how far spheres moved earlier in the time step."""
+        return max(self.contact + self.reach, self.min_tile) + 2.0 * self.margin + drift
+
+    def _drift(self, start):
+        """Largest displacement of any sphere since ``start`` (owned rows)."""
+        local = float(np.sqrt(((self.X - start) ** 2).sum(axis=1)).max()) if start.shape[0] else 0.0
+        return self.domain.max(local)
 
     def interact(self, step, time):
         """Step 2: link, minimise, link what the minimisation made touch, until nothing new.
         Returns whether any link was made."""
-        new = cross_cluster_contacts(self.X, self.R, self.cluster, self.grid_side, self.grid_k)
+        _, ids, X = self._with_ghosts(self.contact)
+        n_owned = self.X.shape[0]
+        new = self._shared_pairs(cross_cluster_contacts(X, self.R_all[ids], self.cluster[ids], self.grid_side,
+                                                        self.grid_k), ids, n_owned)
         if new.shape[0] == 0:
             return False
         made = [new]
         self.links.add(new[:, 0], new[:, 1], step)
+        start = self.X.copy()
         for _ in range(MAX_LINK_ROUNDS):
-            made_so_far = np.concatenate(made)
-            moving = self._minimise(made_so_far, step, time)
-            fresh = unlinked_contacts(self.X, self.R, moving, self.grid_side, self.grid_k,
-                                      self.links.head, self.links.next, self.links.to)
+            moving = self._minimise(np.concatenate(made), step, time, self._drift(start))
+            _, ids, X = self._with_ghosts(self.contact + self._drift(start))
+            touching = unlinked_contacts(X, self.R_all[ids], moving, self.grid_side, self.grid_k, ids,
+                                         self.links.head, self.links.next, self.links.to)
+            fresh = self._shared_pairs(touching, ids, n_owned)
             if fresh.shape[0] == 0 or self.links.add(fresh[:, 0], fresh[:, 1], step) == 0:
                 break
             made.append(fresh)
         else:
             raise MinimiserFailure(f"time step {step} (t = {time:.6g}): the link set still changed after "
                                    f"{MAX_LINK_ROUNDS} rounds of minimisation (step 2e)")
-        labels, m = merge_clusters(self.cluster, self.n_clusters, np.concatenate(made))
-        mass_weighted_velocities(self.V, self.m, labels, m)  # step 3, eq. 2.9
+        made = np.concatenate(made)
+        involved = involved_spheres(self.cluster, self.n_clusters, made)
+        labels, m = merge_clusters(self.cluster, self.n_clusters, made)
+        merged = np.unique(labels[involved])
+        own_labels = labels[self.global_id]  # step 3, eq. 2.9
+        sums = self.domain.sum_array(cluster_momenta(self.V, self.m_all[self.global_id], own_labels, merged))
+        set_cluster_velocities(self.V, own_labels, merged, sums)
         self.cluster, self.n_clusters = labels, m
         return True
 
-    def _minimise(self, made, step, time):
+    def _minimise(self, made, step, time, drift):
+        """One minimisation (step 2c) around the links ``made``; returns the owned rows that moved.
+        ``drift``: how far spheres moved earlier in this time step."""
         involved = involved_spheres(self.cluster, self.n_clusters, made)
         if self.formulation == "almost_rigid":
             k = self.tiles or tiles_per_side(int(involved.sum()), self.d, self.L, self.min_tile)
         else:
             k = 1
-        seeds = np.unique(made.reshape(-1))
-        moving, anchors = select_spheres(self.X, involved, seeds, self.L, k)
-        problem = build_problem(self.X, self.R, moving, anchors, self.links, self.reach, self.local_of)
+        seeds = np.flatnonzero(np.isin(self.global_id, made.reshape(-1)))
+        active = np.unique(self.domain.gather(seed_tiles(self.X, seeds, self.L, k)))
+        moving, anchors = select_spheres(self.X, involved[self.global_id], active, self.L, k)
         carry = self.daha.carry_multipliers
-        carried = self._carried_multipliers(problem) if carry else None
-        outcome = minimise(problem, self.daha, self.attraction_range, self.exchange, multipliers=carried)
+        while True:
+            problem, exchange = self._problem(moving, anchors, drift)
+            carried = self._carried_multipliers(problem) if carry else None
+            outcome = minimise(problem, self.daha, self.attraction_range, exchange, multipliers=carried)
+            self.work += problem.n_moving * outcome.iterations
+            if not outcome.left_halo:
+                break
+            self.margin *= 2.0  # every rank saw the same largest displacement
         if carry:
             self._keep_multipliers(problem, outcome.multipliers)
         self.n_minimisations += 1
         self.n_iterations += outcome.iterations
         self.max_iterations = max(self.max_iterations, outcome.iterations)
-        where = (f"time step {step} (t = {time:.6g}), {problem.n_moving} moving spheres, "
-                 f"{problem.n_links} links, {problem.pair_a.size} candidate pairs")
+        where = (f"time step {step} (t = {time:.6g}), {int(self.domain.sum(problem.n_moving))} moving spheres, "
+                 f"{int(self.domain.sum(problem.n_links))} links")
         if not outcome.finite:
             raise MinimiserFailure(f"DAHA produced a non-finite position at iteration {outcome.iterations}, {where}")
         if not outcome.converged:
@@ -170,15 +251,49 @@ class _Run:
         self.X[moving] = problem.positions[: problem.n_moving]
         return moving
 
+    def _problem(self, moving, anchors, drift):
+        """The minimisation of the owned rows ``moving`` with ``anchors`` fixed, the members of
+        other processes within the halo width as ghosts; and its exchange."""
+        members = np.concatenate([moving, anchors])
+        width = self._problem_width(drift)
+        if width > self.domain.max_halo_width:
+            raise MinimiserFailure(f"the halo a minimisation needs ({width:g} wide: spheres moved {drift:g} earlier "
+                                   f"in the step, margin {self.margin:g}) is wider than the narrowest rank slab "
+                                   f"({self.domain.max_halo_width:g}); run this task on fewer ranks")
+        halo = self.domain.ghosts(self.X[members], self.global_id[members], width)
+        is_moving = np.zeros(members.size)
+        is_moving[: moving.size] = 1.0
+        ghosts = Ghosts(positions=halo.exchange(self.X[members]).copy(), radii=self.R_all[halo.ghost_global_id],
+                        global_id=halo.ghost_global_id, moving=halo.exchange(is_moving) > 0.5)
+        problem = build_problem(self.X, self.R, moving, anchors, self.links, self.reach, self.local_of,
+                                global_id=self.global_id, ghosts=ghosts)
+        return problem, self.domain.problem_exchange(halo, problem.first_ghost, self.margin)
+
     def _carried_multipliers(self, problem):
         """Each candidate pair's multiplier at the end of its link's last minimisation (NaN if none)."""
         index = problem.pair_links(self.links)
         return np.where(index >= 0, self.links.multiplier[index], np.nan)
 
     def _keep_multipliers(self, problem, multipliers):
+        """Store the linked pairs' final multipliers, on every process (each counted pair once)."""
         index = problem.pair_links(self.links)
-        linked = index >= 0
-        self.links.multiplier[index[linked]] = multipliers[linked]
+        kept = (index >= 0) & problem.pair_counted
+        rows = np.column_stack([index[kept].astype(np.float64), multipliers[kept]])
+        rows = self.domain.gather(rows)
+        self.links.multiplier[rows[:, 0].astype(np.int64)] = rows[:, 1]
+
+    def step_imbalance(self):
+        """max / mean over the ranks of the work since the last call (owned spheres plus
+        moving-sphere iterations)."""
+        imbalance = self.domain.imbalance(self.X.shape[0] + self.work)
+        self.work = 0.0
+        return imbalance
+
+    def result_rows(self):
+        """Positions and velocities of all spheres, by global id."""
+        ids = self.domain.gather(self.global_id)
+        order = np.argsort(ids)
+        return self.domain.gather(self.X)[order], self.domain.gather(self.V)[order]
 
 
 def _quiet_steps_within(quiet, steps_left, time_left_in_steps):
@@ -187,9 +302,47 @@ def _quiet_steps_within(quiet, steps_left, time_left_in_steps):
                    else math.inf))
 
 
+def _time_steps(run, dt0, max_time, max_steps):
+    """The time loop of section 3 until one cluster remains or a limit is reached."""
+    n = run.n
+    t = 0.0
+    step = 0
+    n_wall = 0
+    clusters, times, imbalance = [], [], []
+    reason = "single_cluster"
+    look_ahead = False  # after a step that made no link, look for quiet steps
+    while run.n_clusters > 1:
+        if t >= max_time:
+            reason = "max_time"
+            break
+        if step >= max_steps:
+            reason = "max_steps"
+            break
+        dt = dt0 * (1.0 + (n - run.n_clusters) / (n - 1))
+        quiet = _quiet_steps_within(run.quiet_steps(dt), max_steps - step, (max_time - t) / dt) if look_ahead else 0
+        if quiet > 0:  # steps 1 only: nothing touches, nothing reaches a wall
+            run.X += (quiet * dt) * run.V
+            for _ in range(quiet):
+                t += dt
+                times.append(t)
+            clusters.extend([run.n_clusters] * quiet)
+            step += quiet
+            look_ahead = False  # the next step may link: search it
+            continue
+        dt = min(dt, max_time - t)
+        step += 1
+        t += dt
+        n_wall += run.advect(dt)  # step 1
+        look_ahead = not run.interact(step, t)
+        imbalance.append(run.step_imbalance())
+        clusters.append(run.n_clusters)
+        times.append(t)
+    return t, step, n_wall, reason, clusters, times, imbalance
+
+
 def simulate_ts(positions, velocities, radii, masses, box_length, time_step_factor=0.005,
                 formulation="almost_rigid", daha=None, attraction_range=None, max_time=math.inf,
-                max_steps=None, tiles=None, exchange=None):
+                max_steps=None, tiles=None, domain=None):
     """Run time-stepping ballistic aggregation in the box ``[0, box_length]^d``.
 
     Parameters
@@ -203,7 +356,9 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
     max_time, max_steps : stop there if several clusters remain.
     tiles : int or None
         Tiles per side (almost-rigid); ``None`` follows the law of :mod:`parsim.core.ts.tiles`.
-    exchange : the minimiser's halo interface; default :class:`parsim.core.ts.daha.SerialExchange`.
+    domain : where the spheres live (:mod:`parsim.core.ts.domain`); default one process,
+        :class:`parsim.parallel.tiled.DecomposedDomain` for a run over MPI ranks.  Every rank
+        passes the same arguments and gets the same result.
 
     Raises
     ------
@@ -225,41 +380,16 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
     if not speed > 0.0:
         raise ValueError("velocities must not all be zero (dt(0) = factor L / max|V|)")
     dt0 = time_step_factor * L / speed
-    run = _Run(X, V, R, m, L, formulation, daha, attraction_range, tiles, exchange)
-    t = 0.0
-    step = 0
-    n_wall = 0
-    clusters, times = [], []
-    reason = "single_cluster"
-    look_ahead = False  # after a step that made no link, look for quiet steps
-    while run.n_clusters > 1:
-        if t >= max_time:
-            reason = "max_time"
-            break
-        if step >= max_steps:
-            reason = "max_steps"
-            break
-        dt = dt0 * (1.0 + (n - run.n_clusters) / (n - 1))
-        quiet = _quiet_steps_within(run.quiet_steps(dt), max_steps - step, (max_time - t) / dt) if look_ahead else 0
-        if quiet > 0:  # steps 1 only: nothing touches, nothing reaches a wall
-            X += (quiet * dt) * V
-            for _ in range(quiet):
-                t += dt
-                times.append(t)
-            clusters.extend([run.n_clusters] * quiet)
-            step += quiet
-            look_ahead = False  # the next step may link: search it
-            continue
-        dt = min(dt, max_time - t)
-        step += 1
-        X += dt * V  # step 1, free advection
-        t += dt
-        n_wall += reflect_at_walls(X, V, R, run.cluster, run.n_clusters, L)
-        look_ahead = not run.interact(step, t)
-        clusters.append(run.n_clusters)
-        times.append(t)
+    domain = domain or SerialDomain()
+    try:
+        run = _Run(X, V, R, m, L, formulation, daha, attraction_range, tiles, domain)
+        t, step, n_wall, reason, clusters, times, imbalance = _time_steps(run, dt0, max_time, max_steps)
+        X, V = run.result_rows()
+    finally:
+        domain.close()
     return TSResult(positions=X, velocities=V, cluster=run.cluster, links=run.links.pairs(),
                     link_steps=run.links.steps(), time=t, n_steps=step, n_collisions=n - run.n_clusters,
                     n_wall_reflections=n_wall, n_minimisations=run.n_minimisations,
                     n_iterations=run.n_iterations, max_iterations=run.max_iterations, stop_reason=reason,
-                    cluster_history=np.array(clusters, dtype=np.int64), time_history=np.array(times))
+                    cluster_history=np.array(clusters, dtype=np.int64), time_history=np.array(times),
+                    imbalance=np.array(imbalance))

@@ -35,15 +35,23 @@ def tiles_per_side(n_interacting, dimension, box_length, min_side):
 
 
 @jit
-def _select(X, involved, seeds, side, k):
+def _tiles_of(X, rows, side, k):
+    tile = np.empty(rows.shape[0], dtype=np.int64)
+    for r in range(rows.shape[0]):
+        tile[r] = cell_index(X[rows[r]], side, k)
+    return tile
+
+
+@jit
+def _select(X, involved, active, side, k):
     """Moving and anchor spheres: involved spheres in active tiles, and in the tiles around them."""
     n, d = X.shape
     tile = np.empty(n, dtype=np.int64)
     for i in range(n):
         tile[i] = cell_index(X[i], side, k) if involved[i] else -1
     state = np.zeros(k**d, dtype=np.int8)  # 2 active (inner), 1 outer
-    for s in seeds:
-        state[tile[s]] = 2
+    for t in active:
+        state[t] = 2
     offsets = neighbour_offsets(d)
     coords = np.empty(d, dtype=np.int64)
     block = np.empty(offsets.shape[0], dtype=np.int64)
@@ -76,11 +84,17 @@ def _select(X, involved, seeds, side, k):
     return moving, anchors
 
 
-def select_spheres(X, involved, seeds, box_length, k):
-    """``(moving, anchors)`` global sorted indices for ``k`` tiles per side.
+def seed_tiles(X, seeds, box_length, k):
+    """The tiles (flat indices, ``k`` per side) holding the rows ``seeds`` of ``X``."""
+    return _tiles_of(X, np.asarray(seeds, dtype=np.int64), box_length / k, k)
 
-    ``involved`` marks the spheres of the interacting clusters, ``seeds`` the ends of the
-    links made in this time step (they make their tiles active).  With ``k = 1`` every
-    involved sphere moves (the non-rigid formulation of section 3.1).
+
+def select_spheres(X, involved, active_tiles, box_length, k):
+    """``(moving, anchors)``, sorted rows of ``X``, for ``k`` tiles per side.
+
+    ``involved`` marks the spheres of the interacting clusters; ``active_tiles`` are the
+    tiles holding an end of a link made in this time step (:func:`seed_tiles`, over all
+    processes).  With ``k = 1`` every involved sphere moves (the non-rigid formulation of
+    section 3.1).
     """
-    return _select(X, involved, np.asarray(seeds, dtype=np.int64), box_length / k, k)
+    return _select(X, involved, np.asarray(active_tiles, dtype=np.int64), box_length / k, k)

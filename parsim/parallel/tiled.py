@@ -1,0 +1,141 @@
+"""One time-stepping aggregation on several MPI ranks: the domain of a decomposed run.
+
+:func:`parsim.core.ts.simulate_ts` runs unchanged on every rank of a communicator when it
+is given a :class:`DecomposedDomain` (the interface is in :mod:`parsim.core.ts.domain`):
+
+- the box is cut into ``k^d`` tiles, at least twice as wide as the halo a minimisation needs
+  (at most ``MAX_TILES_PER_SIDE`` per side); the ranks form a Cartesian grid and each owns a
+  block of whole tiles and the spheres whose centres lie in it
+  (:class:`parsim.parallel.decomposition.Decomposition`).  The tiles only say who computes
+  what: the minimiser's inner and outer rectangles (section 3.3) are chosen per minimisation
+  from the interacting spheres, as on one process, so the physics does not depend on the ranks;
+- after each free flight the spheres migrate to their new owners
+  (:func:`parsim.parallel.migration.migrate`); when the owned spheres differ by more than
+  ``REBALANCE_ABOVE`` (max / mean) the tile blocks are first moved to even them out;
+- the halos of contact searches, quiet-step bounds and minimisations are
+  :class:`parsim.parallel.halo.HaloPlan` s; in a minimisation every DAHA iteration refreshes
+  the ghost rows (positions, and the sleeping flags) through :class:`_ProblemExchange`;
+- the radii, masses, cluster labels and links are known on every rank: new links are
+  gathered on all ranks each time step (a few per sphere over a whole run), so the cluster
+  relabelling is the same deterministic union-find everywhere, and each merged cluster's
+  velocity comes from one global mass-weighted reduction (eq. 2.9).
+
+Results agree with one process to round-off, not bitwise: forces on a sphere and the
+reductions sum in an order that depends on how the spheres are split, and the quiet-step
+horizon is bounded by the narrowest rank slab.
+"""
+
+import math
+
+import numpy as np
+from mpi4py import MPI
+
+from parsim.parallel.decomposition import Decomposition
+from parsim.parallel.halo import HaloPlan
+from parsim.parallel.migration import migrate
+
+#: Most tiles per side: enough to balance a few hundred ranks per axis, few enough that
+#: balancing and ownership stay cheap.
+MAX_TILES_PER_SIDE = 64
+#: Tiles are at least this many halo widths wide, leaving room for the halo to grow.
+TILE_WIDTH_IN_HALOS = 2.0
+#: Move the tile blocks when the most spheres a rank owns exceeds the mean by this factor.
+REBALANCE_ABOVE = 1.25
+
+
+class _ProblemExchange:
+    """DAHA's exchange (:class:`parsim.core.ts.daha.SerialExchange`) over a halo plan."""
+
+    def __init__(self, halo: HaloPlan, domain: "DecomposedDomain", first_ghost: int, margin: float):
+        self.halo = halo
+        self.domain = domain
+        self.first_ghost = first_ghost
+        self.margin = margin
+        self.active = domain.size > 1
+
+    def share(self, values):
+        if not self.active:
+            return
+        owned = values[: self.first_ghost]
+        if values.dtype == np.bool_:
+            values[self.first_ghost:] = self.halo.exchange(owned.astype(np.float64)) > 0.5
+        else:
+            values[self.first_ghost:] = self.halo.exchange(owned)
+
+    def sum(self, value):
+        return self.domain.sum(value)
+
+    def max(self, value):
+        return self.domain.max(value)
+
+
+class DecomposedDomain:
+    """The spheres of one run shared out among the ranks of ``comm`` (collective; every rank
+    builds it with the same arguments and passes it to ``simulate_ts``)."""
+
+    def __init__(self, comm: MPI.Comm, box_length: float, dimension: int):
+        self.comm = comm
+        self.size = comm.Get_size()
+        self.box_length = float(box_length)
+        self.dimension = dimension
+        self.decomposition = None
+
+    def distribute(self, X, V, tile_side):
+        k = min(MAX_TILES_PER_SIDE, int(self.box_length // (TILE_WIDTH_IN_HALOS * tile_side)))
+        try:
+            self.decomposition = Decomposition(self.comm, self.box_length, self.dimension, max(k, 1))
+        except ValueError as error:
+            raise ValueError(f"the box (L = {self.box_length:g}) is too small to share out among {self.size} "
+                             f"ranks: each rank needs a sub-box at least {TILE_WIDTH_IN_HALOS * tile_side:g} "
+                             f"wide ({error})") from None
+        mine = np.flatnonzero(self.decomposition.owner_of(X) == self.decomposition.rank)
+        return mine.astype(np.int64), X[mine].copy(), V[mine].copy()
+
+    def redistribute(self, global_id, X, V):
+        decomposition = self.decomposition
+        if self.size > 1 and decomposition.imbalance(X.shape[0]) > REBALANCE_ABOVE:
+            decomposition.set_tile_splits(decomposition.balanced_splits(decomposition.tile_counts(X)))
+        global_id, arrays = migrate(decomposition, global_id, {"position": X, "velocity": V})
+        return global_id, arrays["position"], arrays["velocity"]
+
+    @property
+    def max_halo_width(self):
+        """The narrowest rank slab along the axes shared among ranks (ghosts come from adjacent ranks)."""
+        d = self.decomposition
+        slabs = [np.diff(split).min() * d.tile_side for split, parts in zip(d.tile_splits, d.dims) if parts > 1]
+        return min(slabs, default=math.inf)
+
+    def ghosts(self, X, global_id, width):
+        return HaloPlan(self.decomposition, X, width, global_id)
+
+    def problem_exchange(self, halo, first_ghost, margin):
+        return _ProblemExchange(halo, self, first_ghost, margin if self.size > 1 else math.inf)
+
+    def sum(self, value):
+        return self.comm.allreduce(value, op=MPI.SUM)
+
+    def max(self, value):
+        return self.comm.allreduce(value, op=MPI.MAX)
+
+    def min(self, value):
+        return self.comm.allreduce(value, op=MPI.MIN)
+
+    def sum_array(self, values):
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        total = np.empty_like(values)
+        self.comm.Allreduce(values, total, op=MPI.SUM)
+        return total
+
+    def gather(self, rows):
+        rows = np.asarray(rows)
+        flat = self.decomposition.allgatherv_rows(rows.reshape(rows.shape[0], int(np.prod(rows.shape[1:]))))
+        return flat.reshape(-1, *rows.shape[1:])
+
+    def imbalance(self, work):
+        return self.decomposition.imbalance(work)
+
+    def close(self):
+        """Release the Cartesian communicator (collective)."""
+        if self.decomposition is not None:
+            self.decomposition.free()
+            self.decomposition = None
