@@ -1,6 +1,8 @@
 """The ``parsim`` command.
 
-    parsim run JOB [--output DIR] [--quiet]   run (or resume) a job, on one rank or under mpiexec
+    parsim run JOB [--output DIR] [--quiet] [--ranks-per-task K]
+                                              run (or resume) a job, on one rank or under mpiexec;
+                                              K ranks run each task together (default 1)
     parsim validate JOB                       check a job file, compute nothing
     parsim info OUTPUT                        what an output folder holds and how far its job got
 
@@ -26,6 +28,10 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("job", type=Path, help="job file (TOML)")
     run.add_argument("--output", type=Path, help="output folder (overrides the job's 'output')")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--ranks-per-task", type=int, default=1, metavar="K",
+                     help="run each task on a group of K ranks (a divisor of the number of ranks; default 1): "
+                          "time-stepping aggregation tasks are decomposed over the group, other tasks run on "
+                          "the group's first rank while the others wait")
 
     validate = commands.add_parser("validate", help="check a job file without computing anything")
     validate.add_argument("job", type=Path)
@@ -49,7 +55,7 @@ def _run(args) -> int:
 
     job = load_job(args.job, SOLVERS, output=args.output)
     try:
-        path = run_job(job, progress=not args.quiet)
+        path = run_job(job, progress=not args.quiet, ranks_per_task=args.ranks_per_task)
     except TaskFailed as failure:
         _print_error(str(failure))
         return EXIT_TASK_FAILED

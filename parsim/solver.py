@@ -1,18 +1,22 @@
 """What a solver is to the job runner.
 
 The runner is generic: a solver is one function from (parameters, random
-generator) to a :class:`TaskResult` (statistics and final configuration), plus
-the declarations the runner needs to validate jobs and lay out the dataset.
+generator, communicator) to a :class:`TaskResult` (statistics and final
+configuration), plus the declarations the runner needs to validate jobs and lay
+out the dataset.
 Every solver in :mod:`parsim.solvers` is a :class:`Solver`; adding one needs no
 change to the scheduler, the output or the command line.
 """
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
 from parsim.parameters import Parameter
+
+if TYPE_CHECKING:  # importing mpi4py.MPI initialises MPI, which `parsim validate` does not need
+    from mpi4py import MPI
 
 LENGTH_UNITS = "job_length_unit"
 TIME_UNITS = "job_time_unit"
@@ -78,7 +82,13 @@ class Solver:
     - ``coordinates(fixed)``: the observable coordinates, from the fixed parameters;
     - ``check(params)``: cross-field checks of one parameter point (raise JobError);
     - ``cost(params)``: relative cost estimate, so the costliest tasks start first;
-    - ``solve(params, rng)``: run one task.
+    - ``solve(params, rng, comm)``: run one task.  ``comm`` is the task's group of
+      ranks (``parsim run --ranks-per-task``; size 1 = serial); every rank of it calls
+      ``solve`` with the same arguments, and the result of its rank 0 is the task's
+      (the other ranks may return None);
+    - ``decomposable``: whether ``solve`` can use a group of several ranks.  A solver
+      that cannot always gets a group of one: the runner calls it on the group's rank 0
+      only, and the group's other ranks wait for the next task.
     """
 
     kind: str
@@ -88,7 +98,8 @@ class Solver:
     coordinates: Callable[[dict], dict[str, Coordinate]]
     check: Callable[[dict], None]
     cost: Callable[[dict], float]
-    solve: Callable[[dict, np.random.Generator], TaskResult]
+    solve: Callable[[dict, np.random.Generator, "MPI.Comm"], TaskResult | None]
+    decomposable: bool = False
 
     def parameter(self, name: str) -> Parameter:
         return next(p for p in self.parameters if p.name == name)

@@ -5,7 +5,7 @@ coordinate), then ``realization`` (CF ``standard_name = "realization"``), then
 the observable dimensions a statistic declares (``r``, ``box_size``, ...).
 Fixed parameters are scalar coordinates.  Every variable has ``units`` and
 ``long_name``; the global attributes carry the parsim version, the job file
-text, the job seed, the MPI size and the creation time.
+text, the job seed, the MPI size, the ranks per task and the creation time.
 """
 
 import datetime
@@ -30,7 +30,8 @@ def all_statistics(solver: Solver) -> tuple[Statistic, ...]:
     return (*solver.statistics, WALL_TIME)
 
 
-def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict], mpi_size: int) -> xr.Dataset:
+def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict], mpi_size: int,
+                  ranks_per_task: int) -> xr.Dataset:
     """Assemble the dataset; ``statistics_of(task)`` gives one finished task's statistics."""
     observable = solver.coordinates(job.fixed)
     leading_shape = (*job.sweep_shape, job.realizations)
@@ -69,13 +70,14 @@ def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict
         "Conventions": "CF-1.10",
         "title": f"parsim {job.kind} job '{job.name}'",
         "source": f"parsim {parsim.__version__}",
-        "history": f"{created} parsim run (job '{job.name}', {mpi_size} MPI ranks)",
+        "history": f"{created} parsim run (job '{job.name}', {mpi_size} MPI ranks, {ranks_per_task} per task)",
         "parsim_version": parsim.__version__,
         "job_name": job.name,
         "job_kind": job.kind,
         "job_seed": job.seed,
         "job_text": job.text,
         "mpi_size": mpi_size,
+        "ranks_per_task": ranks_per_task,
         "date_created": created,
         "comment": "lengths are in the job's length unit (the unit of the sphere radii), "
                    "times in that length unit divided by the unit of the initial speed",
@@ -83,7 +85,7 @@ def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict
     return xr.Dataset(variables, coords=coords, attrs=attrs)
 
 
-VOLATILE_ATTRIBUTES = ("history", "mpi_size", "date_created")
+VOLATILE_ATTRIBUTES = ("history", "mpi_size", "ranks_per_task", "date_created")
 """Global attributes that describe the run, not the results."""
 
 

@@ -8,8 +8,15 @@ the GIL, so the server answers within about a millisecond even while rank 0
 computes.  This keeps every core busy when task costs differ 100-fold, which a
 static split cannot.
 
+Groups (:func:`run_group_tasks`): the ranks can also be split into groups of K
+consecutive ranks that run each task together.  The group leaders share the
+tasks out as above and send each index they take to the rest of their group;
+a rank waiting for its leader sleeps between polls, so it frees its core.
+
 Failure: an exception in a task on any rank prints that rank's message and
-calls ``MPI_Abort``, which ends every rank at once; no rank waits forever.
+calls ``MPI_Abort``, which ends every rank at once; no rank waits forever
+(with groups, the abort is on the whole communicator, whichever rank of a
+group failed).
 Files of tasks already finished are complete on disk (they are written under a
 temporary name and renamed), so nothing finished is lost.  On a single rank the
 exception is raised as :class:`TaskFailed` instead.
@@ -21,12 +28,13 @@ import time
 import traceback
 from typing import Callable
 
+import numpy as np
 from mpi4py import MPI
 
 REQUEST_TAG = 1
 REPLY_TAG = 2
 NO_MORE_TASKS = -1
-POLL_SECONDS = 1e-3  # how often rank 0's server thread looks for requests
+POLL_SECONDS = 1e-3  # how often rank 0's server thread looks for requests, and a group member for its next task
 
 
 class TaskFailed(Exception):
@@ -107,6 +115,71 @@ def run_tasks(
                 done = k
     finally:
         sched.Free()
+
+
+def run_group_tasks(
+    comm: MPI.Comm,
+    ranks_per_task: int,
+    n_tasks: int,
+    work: Callable[[int, MPI.Comm], None],
+    on_finished: Callable[[int, int], None] | None = None,
+    describe_failure: Callable[[int, Exception], str] | None = None,
+) -> None:
+    """Run every task on a group of ``ranks_per_task`` consecutive ranks of ``comm``.
+
+    Every rank of the group that takes task ``k`` calls ``work(k, group)``, with
+    ``group`` the group's communicator.  The group leaders (group rank 0) share
+    the tasks out with :func:`run_tasks`, so ``on_finished(k, leader)`` names
+    the leader by its rank among the leaders.  An exception on any rank of a
+    group ends the job (``MPI_Abort`` on ``comm``).  With ``ranks_per_task = 1``
+    this is :func:`run_tasks` over ``comm``, each rank a group of one
+    (``MPI.COMM_SELF``).  Collective over ``comm``.
+    """
+    if ranks_per_task == 1:
+        run_tasks(comm, n_tasks, lambda k: work(k, MPI.COMM_SELF), on_finished, describe_failure)
+        return
+    describe_failure = describe_failure or _traceback_message
+    rank = comm.Get_rank()
+    group = comm.Split(color=rank // ranks_per_task, key=rank)
+    leading = group.Get_rank() == 0
+    leaders = comm.Split(color=0 if leading else MPI.UNDEFINED, key=rank)
+
+    def run_in_group(k: int) -> None:
+        try:
+            work(k, group)
+        except Exception as error:  # noqa: BLE001 - the other ranks of the group would wait forever
+            _fail(comm, f"{describe_failure(k, error)} (on rank {rank})")
+
+    def lead(k: int) -> None:
+        _send_task(group, k)
+        run_in_group(k)
+
+    try:
+        if leading:
+            run_tasks(leaders, n_tasks, lead, on_finished, describe_failure)
+            _send_task(group, NO_MORE_TASKS)
+        else:
+            while (k := _receive_task(group)) != NO_MORE_TASKS:
+                run_in_group(k)
+    finally:
+        group.Free()
+        if leaders != MPI.COMM_NULL:
+            leaders.Free()
+
+
+def _send_task(group: MPI.Comm, k: int) -> None:
+    """The leader's side of :func:`_receive_task`."""
+    index = np.array([k], dtype=np.int64)
+    group.Ibcast(index, root=0).Wait()
+
+
+def _receive_task(group: MPI.Comm) -> int:
+    """The next task index from the group's leader; polls and sleeps instead of spinning in a blocking call."""
+    index = np.empty(1, dtype=np.int64)
+    request = group.Ibcast(index, root=0)
+    while not request.Test():
+        time.sleep(POLL_SECONDS)
+    return int(index[0])
 
 
 def _serve(sched: MPI.Comm, counter: _TaskCounter, finished: Callable[[int, int], None]) -> None:

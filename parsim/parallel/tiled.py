@@ -26,6 +26,8 @@ horizon is bounded by the narrowest rank slab.
 """
 
 import math
+import time
+from collections import defaultdict
 
 import numpy as np
 from mpi4py import MPI
@@ -43,10 +45,45 @@ TILE_WIDTH_IN_HALOS = 2.0
 REBALANCE_ABOVE = 1.25
 
 
+class Traffic:
+    """What this rank sent and how long it waited, per kind of communication: ``halo``
+    (ghost rows), ``reduction`` (sums and maxima), ``gather`` (rows gathered on every rank:
+    new links, reflections, multipliers), ``migration`` (spheres changing owner).
+    ``calls[kind]``, ``bytes[kind]`` (sent by this rank) and ``seconds[kind]`` accumulate."""
+
+    def __init__(self):
+        self.calls = defaultdict(int)
+        self.bytes = defaultdict(int)
+        self.seconds = defaultdict(float)
+
+    def add(self, kind, nbytes, started):
+        self.calls[kind] += 1
+        self.bytes[kind] += int(nbytes)
+        self.seconds[kind] += time.perf_counter() - started
+
+
+class _MeteredHalo:
+    """A :class:`HaloPlan` whose exchanges are counted in a :class:`Traffic`."""
+
+    def __init__(self, plan: HaloPlan, traffic: Traffic):
+        self.plan = plan
+        self.traffic = traffic
+        self.n_ghost = plan.n_ghost
+        self.ghost_global_id = plan.ghost_global_id
+        self.rows_sent = sum(len(rows) for rows in plan.send_indices)
+
+    def exchange(self, values):
+        started = time.perf_counter()
+        ghosts = self.plan.exchange(values)
+        row_bytes = 8 * int(np.prod(np.shape(values)[1:]))
+        self.traffic.add("halo", self.rows_sent * row_bytes, started)
+        return ghosts
+
+
 class _ProblemExchange:
     """DAHA's exchange (:class:`parsim.core.ts.daha.SerialExchange`) over a halo plan."""
 
-    def __init__(self, halo: HaloPlan, domain: "DecomposedDomain", first_ghost: int, margin: float):
+    def __init__(self, halo: _MeteredHalo, domain: "DecomposedDomain", first_ghost: int, margin: float):
         self.halo = halo
         self.domain = domain
         self.first_ghost = first_ghost
@@ -79,6 +116,7 @@ class DecomposedDomain:
         self.box_length = float(box_length)
         self.dimension = dimension
         self.decomposition = None
+        self.traffic = Traffic()
 
     def distribute(self, X, V, tile_side):
         k = min(MAX_TILES_PER_SIDE, int(self.box_length // (TILE_WIDTH_IN_HALOS * tile_side)))
@@ -87,7 +125,7 @@ class DecomposedDomain:
         except ValueError as error:
             raise ValueError(f"the box (L = {self.box_length:g}) is too small to share out among {self.size} "
                              f"ranks: each rank needs a sub-box at least {TILE_WIDTH_IN_HALOS * tile_side:g} "
-                             f"wide ({error})") from None
+                             f"wide; run it on fewer ranks (parsim run --ranks-per-task)") from error
         mine = np.flatnonzero(self.decomposition.owner_of(X) == self.decomposition.rank)
         return mine.astype(np.int64), X[mine].copy(), V[mine].copy()
 
@@ -95,7 +133,10 @@ class DecomposedDomain:
         decomposition = self.decomposition
         if self.size > 1 and decomposition.imbalance(X.shape[0]) > REBALANCE_ABOVE:
             decomposition.set_tile_splits(decomposition.balanced_splits(decomposition.tile_counts(X)))
+        started = time.perf_counter()
+        leaving = int(np.count_nonzero(decomposition.owner_of(X) != decomposition.rank)) if self.size > 1 else 0
         global_id, arrays = migrate(decomposition, global_id, {"position": X, "velocity": V})
+        self.traffic.add("migration", leaving * 8 * (1 + 2 * self.dimension), started)
         return global_id, arrays["position"], arrays["velocity"]
 
     @property
@@ -106,33 +147,46 @@ class DecomposedDomain:
         return min(slabs, default=math.inf)
 
     def ghosts(self, X, global_id, width):
-        return HaloPlan(self.decomposition, X, width, global_id)
+        return _MeteredHalo(HaloPlan(self.decomposition, X, width, global_id), self.traffic)
 
     def problem_exchange(self, halo, first_ghost, margin):
         return _ProblemExchange(halo, self, first_ghost, margin if self.size > 1 else math.inf)
 
+    def _reduce(self, value, op):
+        started = time.perf_counter()
+        total = self.comm.allreduce(value, op=op)
+        self.traffic.add("reduction", 8, started)
+        return total
+
     def sum(self, value):
-        return self.comm.allreduce(value, op=MPI.SUM)
+        return self._reduce(value, MPI.SUM)
 
     def max(self, value):
-        return self.comm.allreduce(value, op=MPI.MAX)
+        return self._reduce(value, MPI.MAX)
 
     def min(self, value):
-        return self.comm.allreduce(value, op=MPI.MIN)
+        return self._reduce(value, MPI.MIN)
 
     def sum_array(self, values):
+        started = time.perf_counter()
         values = np.ascontiguousarray(values, dtype=np.float64)
         total = np.empty_like(values)
         self.comm.Allreduce(values, total, op=MPI.SUM)
+        self.traffic.add("reduction", values.nbytes, started)
         return total
 
     def gather(self, rows):
+        started = time.perf_counter()
         rows = np.asarray(rows)
         flat = self.decomposition.allgatherv_rows(rows.reshape(rows.shape[0], int(np.prod(rows.shape[1:]))))
+        self.traffic.add("gather", rows.nbytes * (self.size - 1), started)
         return flat.reshape(-1, *rows.shape[1:])
 
     def imbalance(self, work):
-        return self.decomposition.imbalance(work)
+        started = time.perf_counter()
+        imbalance = self.decomposition.imbalance(work)
+        self.traffic.add("reduction", 16, started)
+        return imbalance
 
     def close(self):
         """Release the Cartesian communicator (collective)."""

@@ -6,10 +6,15 @@ remains (section 2), then the shape statistics of section 4.2 measured on the
 final configuration.  ``method = "ed"`` is the exact event-driven method,
 ``method = "ts"`` the time-stepping method with the DAHA minimiser (section 3);
 ``method`` does not enter the seed, so both start from the same initial condition.
+
+On a group of several ranks (``parsim run --ranks-per-task K``) a TS task is
+decomposed over the group's ranks (:class:`parsim.parallel.tiled.DecomposedDomain`);
+an ED task is serial: the group's rank 0 computes it and the other ranks wait.
 """
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,6 +26,9 @@ from parsim.core.ts import FORMULATIONS, DahaParameters, MinimiserFailure, simul
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import REQUIRED, Parameter
 from parsim.solver import LENGTH_UNITS, TIME_UNITS, Configuration, Coordinate, Solver, Statistic, TaskResult
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 PAPER_INITIAL_CONDITION = "lattice_isotropic"  # section 4.1: lattice filling the box, eq. 4.3 velocities
 SUPPLEMENTARY_INITIAL_CONDITION = "unit_lattice_uniform"  # supplementary A: spacing 1, V uniform in [-1/2, 1/2]^d
@@ -117,6 +125,9 @@ STATISTICS = (
     Statistic("stop_reason", "1", "why the run stopped", dtype="int8",
               attrs={"flag_values": np.arange(len(STOP_REASONS), dtype=np.int8),
                      "flag_meanings": " ".join(STOP_REASONS)}),
+    # measured: it depends on how many ranks ran the task, not on the physics
+    Statistic("rank_imbalance", "1", "largest over the time steps of max/mean work over the task's ranks "
+              "(ts with --ranks-per-task > 1; 1 for ed and serial runs)", measured=True),
 )
 
 
@@ -174,6 +185,7 @@ class _Run:
     n_minimisations: int
     n_minimiser_iterations: int
     stop_reason: str
+    imbalance: np.ndarray  #: max/mean work over the ranks per contact-searching time step (ts; empty for ed)
 
 
 def daha_parameters(params: dict) -> DahaParameters:
@@ -188,22 +200,44 @@ def daha_parameters(params: dict) -> DahaParameters:
         sleep_tolerance=params["daha_sleep_tolerance"])
 
 
-def _run_ts(params, positions, velocities, radii, masses, length) -> _Run:
+def _domain(comm: "MPI.Comm", length: float, dimension: int):
+    """The tile decomposition of the box over ``comm``; None (serial) on one rank."""
+    if comm.Get_size() == 1:
+        return None
+    from parsim.parallel.tiled import DecomposedDomain  # here, so that `parsim validate` never initialises MPI
+
+    return DecomposedDomain(comm, length, dimension)
+
+
+def _run_ts(params, positions, velocities, radii, masses, length, comm: "MPI.Comm") -> _Run:
     try:
         result = simulate_ts(positions, velocities, radii, masses, length,
                              time_step_factor=params["time_step_factor"], formulation=params["formulation"],
                              daha=daha_parameters(params),
                              attraction_range=params["attraction_range"] * params["radius"],
-                             max_time=params["max_time"], max_steps=params["max_events"])
+                             max_time=params["max_time"], max_steps=params["max_events"],
+                             domain=_domain(comm, length, params["dimension"]))
     except MinimiserFailure as failure:
         raise NumericalError(f"time stepping: {failure}") from None
     reason = "max_events" if result.stop_reason == "max_steps" else result.stop_reason
     return _Run(result.positions, result.velocities, result.cluster, result.links, result.time, result.n_steps,
                 result.n_collisions, result.n_wall_reflections, result.n_minimisations, result.n_iterations,
-                reason)
+                reason, result.imbalance)
 
 
-def solve(params: dict, rng: np.random.Generator) -> TaskResult:
+def _run_ed(params, positions, velocities, radii, masses, length) -> _Run:
+    result = simulate_ed(positions, velocities, radii, masses, length,
+                         max_time=params["max_time"], max_events=params["max_events"])
+    return _Run(result.positions, result.velocities, result.cluster, result.links, result.time,
+                result.n_events, result.n_collisions, result.n_wall_reflections, 0, 0, result.stop_reason,
+                np.ones(0))
+
+
+def solve(params: dict, rng: np.random.Generator, comm: "MPI.Comm") -> TaskResult | None:
+    """One task on the ranks of ``comm``; the result is on its rank 0, the other ranks return None."""
+    leader = comm.Get_rank() == 0
+    if params["method"] == "ed" and not leader:
+        return None  # ED is serial: the group's rank 0 computes it
     n, d, radius = params["n_spheres"], params["dimension"], params["radius"]
     length = box_length(params)
     positions = lattice_positions(n, d, length, rng)
@@ -215,12 +249,11 @@ def solve(params: dict, rng: np.random.Generator) -> TaskResult:
     masses = np.full(n, params["mass"])
 
     if params["method"] == "ts":
-        run = _run_ts(params, positions, velocities, radii, masses, length)
+        run = _run_ts(params, positions, velocities, radii, masses, length, comm)
     else:
-        result = simulate_ed(positions, velocities, radii, masses, length,
-                             max_time=params["max_time"], max_events=params["max_events"])
-        run = _Run(result.positions, result.velocities, result.cluster, result.links, result.time,
-                   result.n_events, result.n_collisions, result.n_wall_reflections, 0, 0, result.stop_reason)
+        run = _run_ed(params, positions, velocities, radii, masses, length)
+    if not leader:
+        return None
     if not (np.all(np.isfinite(run.positions)) and np.all(np.isfinite(run.velocities))):
         raise NumericalError(f"non-finite positions or velocities after {run.n_events} events")
 
@@ -242,14 +275,16 @@ def solve(params: dict, rng: np.random.Generator) -> TaskResult:
         "n_minimisations": run.n_minimisations,
         "n_minimiser_iterations": run.n_minimiser_iterations,
         "stop_reason": STOP_REASONS.index(run.stop_reason),
+        "rank_imbalance": float(run.imbalance.max(initial=1.0)),
     }
     configuration = Configuration(
         arrays={"spheres/position": run.positions, "spheres/radius": radii, "spheres/mass": masses,
-                "spheres/velocity": run.velocities, "spheres/cluster": run.cluster, "links": run.links},
+                "spheres/velocity": run.velocities, "spheres/cluster": run.cluster, "links": run.links,
+                "diagnostics/rank_imbalance": run.imbalance},
         box_lower=lower, box_upper=upper, periodic=np.zeros(d, dtype=bool))
     return TaskResult(statistics, configuration)
 
 
 SOLVER = Solver(kind="aggregation", description="ballistic aggregation of hard spheres (Degond et al. 2024)",
                 parameters=PARAMETERS, statistics=STATISTICS, coordinates=coordinates, check=check,
-                cost=cost, solve=solve)
+                cost=cost, solve=solve, decomposable=True)

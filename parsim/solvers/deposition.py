@@ -6,6 +6,10 @@ position above the sediment) follow the steepest descent of their centre of mass
 the event-driven algorithm of sections 3 and 4, then the sediment's statistics are
 measured: filling height 2 z_cm (section 4.1), bulk packing fraction and profile,
 coordination between particles, and the events of the special situations.
+
+The algorithm is sequential and not decomposable: with ``parsim run
+--ranks-per-task K > 1`` a task runs on its group's rank 0 while the other ranks
+of the group wait.
 """
 
 import functools
@@ -136,7 +140,8 @@ def cost(params: dict) -> float:
     return float(params["n_particles"]) * len(particle_shape(params)[1])
 
 
-def solve(params: dict, rng: np.random.Generator) -> TaskResult:
+def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
+    """One task; serial, so ``comm`` (a group of one, see :class:`parsim.solver.Solver`) is not used."""
     offsets, radii, volume = particle_shape(params)
     n = params["n_particles"]
     scale = _size_factors(params, rng)

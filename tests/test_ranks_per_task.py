@@ -1,0 +1,181 @@
+"""`parsim run --ranks-per-task K`: each task on a group of K ranks, the same dataset as on one rank."""
+
+import time
+
+import h5py
+import numpy as np
+import pytest
+import xarray as xr
+from mpi4py import MPI
+
+from parsim.job import parse_job
+from parsim.solvers import SOLVERS
+from tests.datasets import reproducible_part, run_serial, snapshot_arrays
+from tests.mpi import parsim_command, run_mpi
+
+PROBE = "tests/scripts/group_probe.py"
+
+ED_JOB = """
+name = "groups_ed"
+kind = "aggregation"
+seed = 11
+realizations = 3
+[parameters]
+method = "ed"
+volume_fraction = 0.2
+[sweep]
+n_spheres = [16, 36]
+"""
+
+DEPOSITION_JOB = """
+name = "groups_deposition"
+kind = "deposition"
+seed = 3
+realizations = 2
+[parameters]
+n_particles = 20
+box_length = 6.0
+packing_samples = 1000
+"""
+
+TS_JOB = """
+name = "groups_ts"
+kind = "aggregation"
+seed = 5
+realizations = 2
+[parameters]
+n_spheres = 64
+volume_fraction = 0.1  # L = 9: wide enough for two ranks' tiles
+[sweep]
+method = ["ed", "ts"]
+"""
+
+
+def write_job(tmp_path, text):
+    path = tmp_path / "job.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def run_on_groups(job, out, ranks, ranks_per_task):
+    return run_mpi(parsim_command("run", job, "--output", str(out), "--quiet", "--ranks-per-task", str(ranks_per_task)),
+                   ranks=ranks, timeout=300)
+
+
+def read_records(prefix, ranks):
+    rows = []
+    for rank in range(ranks):
+        with open(f"{prefix}.{rank}") as file:
+            rows += [tuple(map(int, line.split())) for line in file.read().splitlines() if line]
+    return rows
+
+
+@pytest.mark.mpi
+def test_every_task_runs_once_on_a_whole_group_of_consecutive_ranks(tmp_path):
+    result = run_mpi([PROBE, str(tmp_path / "rec"), "2", "12"], ranks=4)
+    assert result.returncode == 0, result.stderr
+    by_task = {}
+    for k, world_rank, group_rank, group_size in read_records(tmp_path / "rec", 4):
+        assert group_size == 2 and group_rank == world_rank % 2
+        by_task.setdefault(k, []).append(world_rank)
+    assert sorted(by_task) == list(range(12))
+    assert all(sorted(ranks) in ([0, 1], [2, 3]) for ranks in by_task.values()), by_task
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks, task, group_rank", [(4, 1, 1), (2, 0, 0)], ids=["follower", "only_leader"])
+def test_a_failure_on_any_rank_of_a_group_ends_the_job(tmp_path, ranks, task, group_rank):
+    # The failing rank's group partners wait in a collective, the other group sleeps 30 s: neither may delay the end.
+    start = time.perf_counter()
+    result = run_mpi([PROBE, str(tmp_path / "rec"), "2", "4", str(task), str(group_rank)], ranks=ranks, timeout=120)
+    assert result.returncode != 0
+    assert f"synthetic failure in task {task}" in result.stderr
+    assert time.perf_counter() - start < 25
+
+
+@pytest.mark.mpi
+def test_ed_job_on_groups_of_two_is_the_one_rank_job(tmp_path):
+    job = write_job(tmp_path, ED_JOB)
+    four = run_on_groups(job, tmp_path / "four", ranks=4, ranks_per_task=2)
+    assert four.returncode == 0, four.stderr
+    one = run_serial("run", job, "--output", str(tmp_path / "one"), "--quiet")
+    assert one.returncode == 0, one.stderr
+    xr.testing.assert_identical(reproducible_part(tmp_path / "one" / "groups_ed.nc"),
+                                reproducible_part(tmp_path / "four" / "groups_ed.nc"))
+    with xr.open_dataset(tmp_path / "four" / "groups_ed.nc") as ds:
+        assert ds.attrs["mpi_size"] == 4 and ds.attrs["ranks_per_task"] == 2
+        assert (ds.rank_imbalance == 1.0).all() and ds.rank_imbalance.attrs["units"] == "1"
+    for path in (tmp_path / "one" / "tasks").glob("*.h5"):
+        one_arrays, four_arrays = snapshot_arrays(path), snapshot_arrays(tmp_path / "four" / "tasks" / path.name)
+        assert one_arrays.keys() == four_arrays.keys() and one_arrays["diagnostics/rank_imbalance"].shape == (0,)
+        for name, array in one_arrays.items():
+            np.testing.assert_array_equal(array, four_arrays[name], err_msg=name)
+
+
+@pytest.mark.mpi
+def test_deposition_runs_on_the_group_leader(tmp_path):
+    job = write_job(tmp_path, DEPOSITION_JOB)
+    two = run_on_groups(job, tmp_path / "two", ranks=2, ranks_per_task=2)
+    assert two.returncode == 0, two.stderr
+    one = run_serial("run", job, "--output", str(tmp_path / "one"), "--quiet")
+    assert one.returncode == 0, one.stderr
+    xr.testing.assert_identical(reproducible_part(tmp_path / "one" / "groups_deposition.nc"),
+                                reproducible_part(tmp_path / "two" / "groups_deposition.nc"))
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks, ranks_per_task", [(4, 3), (2, 0)])
+def test_ranks_per_task_must_divide_the_ranks(tmp_path, ranks, ranks_per_task):
+    result = run_on_groups(write_job(tmp_path, ED_JOB), tmp_path / "out", ranks=ranks, ranks_per_task=ranks_per_task)
+    divisors = {4: "1, 2, 4", 2: "1, 2"}[ranks]
+    assert result.returncode == 2
+    assert (f"parsim: error: --ranks-per-task {ranks_per_task}: allowed: a divisor of the number of MPI ranks "
+            f"({ranks}): {divisors}") in result.stderr
+    assert result.stderr.count("parsim: error:") == 1 and "Traceback" not in result.stderr
+    assert not (tmp_path / "out").exists()  # checked before anything is written
+
+
+def test_ranks_per_task_must_be_positive(tmp_path):
+    result = run_serial("run", write_job(tmp_path, ED_JOB), "--output", str(tmp_path / "out"), "--ranks-per-task", "0")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert "--ranks-per-task 0: allowed: a divisor of the number of MPI ranks (1): 1" in result.stderr
+
+
+@pytest.mark.parametrize("method", ["ed", "ts"])
+def test_serial_task_records_a_unit_imbalance(method):
+    job = parse_job(TS_JOB.replace('method = ["ed", "ts"]', f'method = ["{method}"]'), SOLVERS)
+    params = job.point_parameters(0)
+    result = SOLVERS["aggregation"].solve(params, np.random.default_rng(1), MPI.COMM_SELF)
+    imbalance = result.configuration.arrays["diagnostics/rank_imbalance"]
+    assert result.statistics["rank_imbalance"] == 1.0 and (imbalance == 1.0).all()
+    if method == "ts":  # one value per time step that searched for contacts (not the quiet ones)
+        assert 0 < len(imbalance) <= result.statistics["n_events"]
+    else:
+        assert imbalance.shape == (0,)
+
+
+@pytest.mark.mpi
+def test_ts_and_ed_job_on_groups_of_two(tmp_path):
+    job = write_job(tmp_path, TS_JOB)
+    four = run_on_groups(job, tmp_path / "four", ranks=4, ranks_per_task=2)
+    assert four.returncode == 0, four.stderr
+    one = run_serial("run", job, "--output", str(tmp_path / "one"), "--quiet")
+    assert one.returncode == 0, one.stderr
+    # TS decomposed over two ranks sums forces in another order: equal to round-off, same counts
+    one_rank, two_ranks = (reproducible_part(tmp_path / out / "groups_ts.nc") for out in ("one", "four"))
+    xr.testing.assert_allclose(one_rank, two_ranks, rtol=1e-9, atol=1e-12)
+    for name in ("n_events", "n_collisions", "n_minimisations", "n_minimiser_iterations", "n_wall_reflections"):
+        assert (one_rank[name] == two_ranks[name]).all(), name
+    with xr.open_dataset(tmp_path / "four" / "groups_ts.nc") as ds:
+        ts, ed = ds.sel({"method": "ts"}), ds.sel({"method": "ed"})
+        assert (ds.n_clusters == 1).all() and (ds.n_collisions == 63).all()
+        assert (ts.n_minimisations > 0).all() and (ed.rank_imbalance == 1.0).all()
+        assert np.isfinite(ts.rank_imbalance).all() and (ts.rank_imbalance >= 1.0).all()
+    for path in (tmp_path / "four" / "tasks").glob("*.h5"):
+        with h5py.File(path) as task:
+            imbalance = task["diagnostics/rank_imbalance"][:]
+            if task.attrs["method"] == "ts":
+                assert 0 < len(imbalance) <= task["statistics/n_events"][()] and (imbalance >= 1.0).all()
+            else:
+                assert imbalance.shape == (0,)
+            assert task["statistics/rank_imbalance"][()] == imbalance.max(initial=1.0)
