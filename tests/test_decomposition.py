@@ -1,4 +1,4 @@
-"""The tile decomposition of the TS solver: ownership, migration, halo and clusters across ranks.
+"""The tile decomposition of the TS solver: ownership, migration and halo across ranks.
 
 Single-rank tests use ``COMM_SELF``; the MPI tests run ``tests/scripts/decomposition_probe.py``
 on 2 and 4 ranks (2 x 1 and 2 x 2 rank grids, and 2 x 2 x 1 in 3-D), where it checks itself
@@ -15,7 +15,6 @@ import pytest
 from mpi4py import MPI
 
 from parsim.core.celllist import cell_index
-from parsim.parallel.components import cluster_velocities, compact_labels, global_cluster_labels
 from parsim.parallel.decomposition import Decomposition, balanced_boundaries, block_of_tiles, even_boundaries
 from parsim.parallel.halo import HaloPlan
 from parsim.parallel.migration import migrate
@@ -23,26 +22,10 @@ from tests.mpi import run_mpi
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 PROBE = str(REPOSITORY / "tests" / "scripts" / "decomposition_probe.py")
-VELOCITY_TOLERANCE = 1e-12  # cluster velocities are O(1); sums in another order differ by round-off
 
 
 def one_rank(dimension=2, tiles=4, box_length=1.0):
     return Decomposition(MPI.COMM_SELF, box_length, dimension, tiles)
-
-
-def serial_union_find_labels(ids, links):
-    """Smallest id of each sphere's component, the textbook way."""
-    parent = {i: i for i in ids}
-
-    def root(i):
-        while parent[i] != i:
-            i = parent[i]
-        return i
-
-    for a, b in links:
-        ra, rb = root(a), root(b)
-        parent[max(ra, rb)] = min(ra, rb)
-    return np.array([root(i) for i in ids])
 
 
 # ownership ----------------------------------------------------------------------------
@@ -169,49 +152,6 @@ def test_halo_on_one_rank_has_no_ghosts_and_reuses_its_buffer():
 # clusters -----------------------------------------------------------------------------
 
 
-def test_labels_match_a_serial_union_find():
-    ids = np.array([40, 7, 13, 2, 99, 5, 61, 8, 30, 17, 3])
-    links = np.array([
-        [40, 7], [7, 13],  # a chain
-        [2, 99], [99, 5], [5, 2],  # a ring
-        [30, 8], [8, 30],  # a pair, given twice
-        [17, 3], [3, 17],  # another pair, reversed
-    ])  # 61 is isolated
-    labels = global_cluster_labels(one_rank(), ids, links)
-    assert labels.tolist() == serial_union_find_labels(ids.tolist(), links.tolist()).tolist()
-    assert labels.tolist() == [7, 7, 7, 2, 2, 2, 61, 8, 8, 3, 3]
-    compact, n_clusters = compact_labels(one_rank(), labels)
-    assert n_clusters == 5 and compact.tolist() == [2, 2, 2, 0, 0, 0, 4, 3, 3, 1, 1]
-    assert global_cluster_labels(one_rank(), ids, np.empty((0, 2))).tolist() == ids.tolist()
-
-
-def test_labels_of_random_graphs_match_a_serial_union_find():
-    rng = np.random.default_rng(3)
-    ids = rng.choice(10_000, 300, replace=False)
-    links = ids[rng.integers(0, 300, (250, 2))]
-    labels = global_cluster_labels(one_rank(), ids, links)
-    assert labels.tolist() == serial_union_find_labels(ids.tolist(), links.tolist()).tolist()
-
-
-def test_cluster_velocities_conserve_momentum():
-    rng = np.random.default_rng(4)
-    labels = rng.choice([3, 11, 17, 40], 50)
-    masses = rng.uniform(0.5, 2.0, 50)
-    velocities = rng.normal(size=(50, 3))
-    new = cluster_velocities(one_rank(dimension=3), labels, masses, velocities)
-    before, after = masses @ velocities, masses @ new
-    assert np.all(np.abs(after - before) <= 1e-12 * (masses * np.linalg.norm(velocities, axis=1)).sum())
-    for label in np.unique(labels):
-        assert np.ptp(new[labels == label], axis=0).max() <= VELOCITY_TOLERANCE
-
-
-def test_cluster_velocity_is_the_mass_weighted_mean():
-    new = cluster_velocities(one_rank(), [4, 4, 9], [1.0, 3.0, 2.0], [[1.0, 0.0], [0.0, 1.0], [5.0, 6.0]])
-    assert new.tolist() == [[0.25, 0.75], [0.25, 0.75], [5.0, 6.0]]
-    with pytest.raises(ValueError, match="masses"):
-        cluster_velocities(one_rank(), [1], [0.0], [[1.0, 0.0]])
-
-
 # several ranks ------------------------------------------------------------------------
 
 
@@ -247,6 +187,5 @@ def one_rank_probe(tmp_path_factory):
 def test_several_ranks_match_one_rank(ranks, dimension, one_rank_probe, tmp_path):
     decomposed = run_probe(tmp_path / "decomposed.npz", ranks, dimension)
     serial = one_rank_probe(dimension)
-    for name in ("id", "label", "compact"):
+    for name in ("id", "mass", "velocity"):
         assert np.array_equal(decomposed[name], serial[name]), name
-    assert np.all(np.abs(decomposed["velocity"] - serial["velocity"]) <= VELOCITY_TOLERANCE)

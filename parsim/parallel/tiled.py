@@ -113,6 +113,7 @@ class DecomposedDomain:
     def __init__(self, comm: MPI.Comm, box_length: float, dimension: int):
         self.comm = comm
         self.size = comm.Get_size()
+        self.peers = self.size > 1  # whether anything is sent at all
         self.box_length = float(box_length)
         self.dimension = dimension
         self.decomposition = None
@@ -155,7 +156,7 @@ class DecomposedDomain:
     def _reduce(self, value, op):
         started = time.perf_counter()
         total = self.comm.allreduce(value, op=op)
-        self.traffic.add("reduction", 8, started)
+        self.traffic.add("reduction", 8 * self.peers, started)
         return total
 
     def sum(self, value):
@@ -172,7 +173,7 @@ class DecomposedDomain:
         values = np.ascontiguousarray(values, dtype=np.float64)
         total = np.empty_like(values)
         self.comm.Allreduce(values, total, op=MPI.SUM)
-        self.traffic.add("reduction", values.nbytes, started)
+        self.traffic.add("reduction", values.nbytes * self.peers, started)
         return total
 
     def gather(self, rows):
@@ -185,7 +186,7 @@ class DecomposedDomain:
     def imbalance(self, work):
         started = time.perf_counter()
         imbalance = self.decomposition.imbalance(work)
-        self.traffic.add("reduction", 16, started)
+        self.traffic.add("reduction", 16 * self.peers, started)
         return imbalance
 
     def close(self):

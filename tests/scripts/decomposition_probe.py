@@ -1,15 +1,15 @@
-"""Check the tile decomposition, migration, halo and cluster bookkeeping on the ranks of COMM_WORLD.
+"""Check the tile decomposition, migration and halo on the ranks of COMM_WORLD.
 
 usage: decomposition_probe.py OUT.npz DIMENSION
 
-Every rank builds the same global set of spheres from one seed (clusters joined by links,
-a ring, isolated spheres) and keeps those it owns.  The rank blocks are balanced on the
+Every rank builds the same global set of spheres from one seed (clusters of spheres and
+isolated spheres) and keeps those it owns.  The rank blocks are balanced on the
 spheres, then every cluster is moved into another rank's sub-box (every ordered pair of
 ranks, hence every edge and corner of the rank grid), one to straddle the point where all
 rank blocks meet and one to a corner outside the box, and the spheres are migrated.
 Each result is checked against a serial computation on the global set.  Rank 0 writes the
-quantities that must not depend on the number of ranks (ids, cluster labels, compact
-labels, cluster velocities) to OUT.npz and prints one line starting with "OK".
+migrated records that must not depend on the number of ranks (ids, masses, velocities;
+the positions do, since clusters are moved into other ranks' sub-boxes) to OUT.npz and prints one line starting with "OK".
 Any failure prints a traceback and aborts every rank.
 """
 
@@ -20,7 +20,6 @@ import traceback
 import numpy as np
 from mpi4py import MPI
 
-from parsim.parallel.components import cluster_velocities, compact_labels, global_cluster_labels
 from parsim.parallel.decomposition import Decomposition
 from parsim.parallel.halo import HaloPlan
 from parsim.parallel.migration import migrate
@@ -32,7 +31,6 @@ N_CLUSTERS = 60
 LARGEST_CLUSTER = 8
 SPREAD = 0.03  # sphere offsets from their cluster centre, well below a tile side (0.125)
 MOMENTUM_TOLERANCE = 1e-12  # relative to sum m|V|: round-off of sums in another order
-VELOCITY_TOLERANCE = 1e-12  # cluster velocities are O(1)
 HALO_STEPS = 3
 STEP = 1e-3  # how far owned spheres move between halo exchanges
 
@@ -54,50 +52,13 @@ def make_world(dimension: int) -> dict:
         "position": centres[cluster] + offsets,
         "mass": rng.uniform(0.5, 2.0, n),
         "velocity": rng.normal(size=(n, dimension)),
-        "links": make_links(rng, cluster, sizes),
     }
-
-
-def make_links(rng, cluster, sizes) -> np.ndarray:
-    """Links as pairs of sphere indices: a random tree in every cluster, a ring, two clusters joined."""
-    first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    links = []
-    for c, size in enumerate(sizes):
-        links += [(first[c] + i, first[c] + rng.integers(i)) for i in range(1, size)]
-    ring = int(np.argmax(sizes >= 4))
-    links.append((first[ring], first[ring] + sizes[ring] - 1))  # closes a cycle in a cluster of 4 or more
-    links.append((first[3], first[4] + sizes[4] - 1))  # clusters 3 and 4 are one component
-    return np.array(links, dtype=np.int64)
 
 
 def rows_of(world: dict, ids: np.ndarray) -> np.ndarray:
     """Rows of the global set holding the spheres ``ids``."""
     sorter = np.argsort(world["id"])
     return sorter[np.searchsorted(world["id"], ids, sorter=sorter)]
-
-
-def serial_labels(ids: np.ndarray, links: np.ndarray) -> np.ndarray:
-    """Smallest id of each sphere's component, by a plain union-find over sphere indices."""
-    parent = list(range(ids.shape[0]))
-
-    def root(i):
-        while parent[i] != i:
-            i = parent[i]
-        return i
-
-    for a, b in links:
-        parent[root(a)] = root(b)
-    roots = np.array([root(i) for i in range(ids.shape[0])])
-    smallest = {r: ids[roots == r].min() for r in set(roots.tolist())}
-    return np.array([smallest[r] for r in roots], dtype=np.int64)
-
-
-def serial_cluster_velocities(labels, masses, velocities) -> np.ndarray:
-    out = np.empty_like(velocities)
-    for label in np.unique(labels):
-        members = labels == label
-        out[members] = (masses[members, None] * velocities[members]).sum(axis=0) / masses[members].sum()
-    return out
 
 
 def move_clusters(world: dict, decomposition: Decomposition, rng) -> np.ndarray:
@@ -222,30 +183,6 @@ def check_halo(decomposition, world, positions, ids, records, width) -> int:
     return plan.n_ghost
 
 
-def check_components(decomposition, world, positions, ids, records) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Labels, compact labels, cluster velocities and the number of clusters equal the serial ones; returns them."""
-    rank, size = decomposition.rank, decomposition.size
-    links = world["id"][world["links"]]
-    link_owners = decomposition.owner_of(positions)[world["links"]]
-    either_end = links[np.any(link_owners == rank, axis=1)]
-    first_end_only = links[link_owners[:, 0] == rank]
-    labels = global_cluster_labels(decomposition, ids, either_end)
-    expected = serial_labels(world["id"], world["links"])
-    mine = rows_of(world, ids)
-    assert np.array_equal(labels, expected[mine]), "labels differ from the serial union-find"
-    assert np.array_equal(global_cluster_labels(decomposition, ids, first_end_only), labels), \
-        "labels depend on which rank knows a link"
-    spanning = decomposition.comm.allreduce(int(np.any(labels == expected[world["cluster"] == 0][0])))
-    assert spanning == size, f"cluster 0 spans {spanning} of {size} ranks"
-    velocities = cluster_velocities(decomposition, labels, records["mass"], records["velocity"])
-    serial = serial_cluster_velocities(expected, world["mass"], world["velocity"])[mine]
-    assert np.all(np.abs(velocities - serial) <= VELOCITY_TOLERANCE), np.abs(velocities - serial).max()
-    compact, n_clusters = compact_labels(decomposition, labels)
-    serial_compact = np.searchsorted(np.unique(expected), expected[mine])
-    assert n_clusters == np.unique(expected).shape[0] and np.array_equal(compact, serial_compact)
-    return labels, compact, velocities, n_clusters
-
-
 def main(out: str, dimension: int) -> None:
     comm = MPI.COMM_WORLD
     check_too_few_tiles(comm, dimension)
@@ -269,19 +206,18 @@ def main(out: str, dimension: int) -> None:
 
     ghosts = [check_halo(decomposition, world, moved, ids, records, width)
               for width in (decomposition.tile_side, decomposition.tile_side / 2)]
-    labels, compact, velocities, n_clusters = check_components(decomposition, world, moved, ids, records)
 
     counts = comm.allgather(ids.shape[0])
     imbalance = decomposition.imbalance(ids.shape[0])
     assert abs(imbalance - max(counts) / np.mean(counts)) < 1e-12, (imbalance, counts)
-    gathered = comm.gather((ids, labels, compact, velocities), root=0)
+    gathered = comm.gather((ids, records["mass"], records["velocity"]), root=0)
     if rank == 0:
         merged = [np.concatenate(part) for part in zip(*gathered)]
         order = np.argsort(merged[0])
-        np.savez(out, **{name: array[order] for name, array in zip(("id", "label", "compact", "velocity"), merged)})
+        np.savez(out, **{name: array[order] for name, array in zip(("id", "mass", "velocity"), merged)})
         grid = "x".join(map(str, decomposition.dims))
         print(f"OK ranks={comm.Get_size()} grid={grid} spheres={world['id'].shape[0]} moved={n_moved} "
-              f"ghosts={ghosts} clusters={n_clusters} splits={[s.tolist() for s in decomposition.tile_splits]} imbalance={imbalance:.3f}", flush=True)
+              f"ghosts={ghosts} splits={[s.tolist() for s in decomposition.tile_splits]} imbalance={imbalance:.3f}", flush=True)
     decomposition.free()
 
 
