@@ -9,7 +9,7 @@ import xarray as xr
 
 from parsim.comparison import markdown, method_comparison
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
-from parsim.core.ts import DahaParameters, simulate_ts, stepper
+from parsim.core.ts import DahaParameters, daha, simulate_ts, stepper
 from parsim.core.ts.contacts import cross_cluster_contacts
 from parsim.core.ts.daha import FULL_SWEEP_EVERY, attraction_energy, minimise
 from parsim.core.ts.links import LinkSet
@@ -258,3 +258,25 @@ def test_ts_job_identical_on_one_and_two_ranks(tmp_path):
     assert table.count("\n| 64 |") == 2  # one row per volume fraction
     for row in method_comparison(a):
         assert 0.3 < row["N_c ED"] < 0.8 and 0.3 < row["N_c TS"] < 0.8  # near 0.5 (Fig. 7)
+
+
+def test_stiff_contacts_do_not_throw_spheres_away(monkeypatch):
+    """A jammed clump with large multipliers on its pairs (as in long minimisations at
+    N = 10^5, where a disc was thrown 130 R away): the explicit kick is unstable there, the
+    stiffness-limited kick keeps every disc near its place (it may need more iterations than
+    allowed here; the stepper would then report the failure)."""
+    rng = np.random.default_rng(13)
+    n = int(rng.integers(8, 30))
+    x = 5.0 + rng.uniform(0.0, 0.22 * math.sqrt(n), (n, 2))
+    multipliers = None
+    moved = {}
+    limited = daha.STIFFNESS_LIMIT
+    for limit in (math.inf, limited):
+        monkeypatch.setattr(daha, "STIFFNESS_LIMIT", limit)
+        problem, _ = problem_of(x, touching_links(x))
+        if multipliers is None:
+            multipliers = np.exp(rng.uniform(0.0, math.log(300.0), problem.pair_a.size))
+        minimise(problem, replace(PARAMS, max_iterations=4000), multipliers=multipliers)
+        moved[limit] = np.linalg.norm(problem.positions - x, axis=1).max()
+    assert moved[math.inf] > 50 * R, "the test no longer shows the instability"
+    assert moved[limited] < 10 * R

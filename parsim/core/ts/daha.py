@@ -96,6 +96,8 @@ from parsim.core.jit import jit
 OVERLAP_FLOOR = 1e-9
 #: The multiplier rate is kept below this fraction of the linear stability bound c gamma / (2 alpha).
 STABILITY_MARGIN = 0.5
+#: A sphere's kick is scaled down when delta^2 times its stiffness exceeds this (module docstring).
+STIFFNESS_LIMIT = 2.0
 #: With sleeping spheres, every sphere is updated (and the stopping conditions tested) once
 #: in this many iterations.
 FULL_SWEEP_EVERY = 16
@@ -189,16 +191,20 @@ def _drift(P, U, awake, h):
 @jit
 def _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, lam,
                      sphere_overlap, mean_overlap, dynamic, delta, alpha, gamma, c_bar, range_sq, out,
-                     damping_of):
-    """Forces at the half step, eqs. (3.21)–(3.23); new positions of the awake spheres go to ``out``."""
+                     damping_of, stiffness_limit):
+    """Forces at the half step, eqs. (3.21)–(3.23); new positions of the awake spheres go to ``out``.
+    A sphere whose stiffness ``K`` exceeds ``stiffness_limit / delta^2`` gets its kick scaled
+    by ``stiffness_limit / (delta^2 K)`` (module docstring, "Stiff spheres")."""
     d = out.shape[1]
     force = np.empty(d)
     for i in awake:
         for k in range(d):
             force[k] = 0.0
+        stiffness = 0.0
         for e in range(link_ptr[i], link_ptr[i + 1]):  # attraction -alpha grad W (3.5 / 3.30)
             j = link_to[e]
             if _distance_sq(P, i, P, j) <= range_sq:
+                stiffness += alpha
                 for k in range(d):
                     force[k] -= alpha * (P[i, k] - P[j, k])
         for e in range(pair_ptr[i], pair_ptr[i + 1]):  # constraints, grad_i phi = -2 (X_i - X_j)
@@ -206,12 +212,17 @@ def _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_
             if lam[p] == 0.0:
                 continue
             j = pair_b[p] if pair_a[p] == i else pair_a[p]
-            coefficient = 2.0 * lam[p] * (alpha + gamma * _phi(P, R, i, j))
+            distance_sq = _distance_sq(P, i, P, j)
+            contact = R[i] + R[j]
+            strength = alpha + gamma * (contact * contact - distance_sq)
+            stiffness += 2.0 * lam[p] * (abs(strength) + 2.0 * gamma * distance_sq)
+            coefficient = 2.0 * lam[p] * strength
             for k in range(d):
                 force[k] += coefficient * (P[i, k] - P[j, k])
+        step = delta * min(1.0, stiffness_limit / (delta * delta * stiffness)) if stiffness > 0.0 else delta
         speed = 0.0
         for k in range(d):
-            U[i, k] += delta * force[k]
+            U[i, k] += step * force[k]
             speed += U[i, k] * U[i, k]
         if dynamic:  # eq. 3.29; mean_overlap > 0 (floored)
             c = c_bar * (1.0 + abs(delta * math.sqrt(speed) - sphere_overlap[i]) / mean_overlap)
@@ -501,7 +512,8 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
         exchange.share(P)
         _kick_damp_drift(P, U, R, awake, problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of,
                          problem.pair_a, problem.pair_b, lam, sphere_overlap, guarded, params.dynamic, delta,
-                         params.attraction, params.penalty, params.damping, range_sq, new, damping_of)
+                         params.attraction, params.penalty, params.damping, range_sq, new, damping_of,
+                         STIFFNESS_LIMIT)
         _accept(P, new, awake)
         exchange.share(P)
         if params.dynamic:

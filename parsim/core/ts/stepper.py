@@ -58,6 +58,9 @@ CANDIDATE_REACH = 1.0
 #: (the halo is that much wider on both sides); a minimisation that goes farther is run again
 #: from its start with the margin doubled, which gives the same result.
 HALO_MARGIN = 2.0
+#: A minimisation that moves a sphere farther than this (in largest radii) has gone unstable
+#: and is reported (DAHA resolves overlaps of at most 2 R; a few radii of chain pushing is normal).
+MAX_DISPLACEMENT = 10.0
 #: Rounds of steps 2c-2d in one time step before it is reported as not settling.
 MAX_LINK_ROUNDS = 1000
 #: The quiet-step search examines pairs up to the gap the fastest pair closes in this many steps
@@ -119,6 +122,7 @@ class _Run:
         self.grid_k, self.grid_side = grid_size(L, self.contact, d, n)
         self.min_tile = max(self.contact + self.reach, attraction_range if math.isfinite(attraction_range) else 0.0)
         self.margin = HALO_MARGIN * float(R.max())
+        self.max_displacement = MAX_DISPLACEMENT * float(R.max())
         self.global_id, self.X, self.V = domain.distribute(X, V, self._problem_width(0.0))
         self.R = R[self.global_id]
         self.local_of = np.full(n, -1, dtype=np.int64)
@@ -233,6 +237,8 @@ class _Run:
             if not outcome.left_halo:
                 break
             self.margin *= 2.0  # every rank saw the same largest displacement
+            if self.margin > self.max_displacement:
+                break
         if carry:
             self._keep_multipliers(problem, outcome.multipliers)
         self.n_minimisations += 1
@@ -242,6 +248,12 @@ class _Run:
                  f"{int(self.domain.sum(problem.n_links))} links")
         if not outcome.finite:
             raise MinimiserFailure(f"DAHA produced a non-finite position at iteration {outcome.iterations}, {where}")
+        moved = self.domain.max(float(np.sqrt(((problem.positions[:problem.n_moving] - self.X[moving]) ** 2)
+                                              .sum(axis=1)).max()) if moving.size else 0.0)
+        if outcome.left_halo or moved > self.max_displacement:
+            raise MinimiserFailure(f"DAHA moved a sphere by more than {self.max_displacement:g} ({MAX_DISPLACEMENT:g} "
+                                   f"largest radii) at iteration {outcome.iterations}: the iteration went "
+                                   f"unstable, {where}")
         if not outcome.converged:
             raise MinimiserFailure(
                 f"DAHA did not converge in {outcome.iterations} iterations, {where}: mean overlap "
