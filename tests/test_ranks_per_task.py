@@ -62,6 +62,16 @@ def run_on_groups(job, out, ranks, ranks_per_task):
                    ranks=ranks, timeout=300)
 
 
+def run_grouped_and_serial(tmp_path, text, ranks, ranks_per_task):
+    """The job ``text`` on ``ranks`` ranks in groups (output in ``grouped/``) and on one rank (``one/``)."""
+    job = write_job(tmp_path, text)
+    grouped = run_on_groups(job, tmp_path / "grouped", ranks=ranks, ranks_per_task=ranks_per_task)
+    assert grouped.returncode == 0, grouped.stderr
+    one = run_serial("run", job, "--output", str(tmp_path / "one"), "--quiet")
+    assert one.returncode == 0, one.stderr
+    return tmp_path / "grouped", tmp_path / "one"
+
+
 def read_records(prefix, ranks):
     rows = []
     for rank in range(ranks):
@@ -95,18 +105,13 @@ def test_a_failure_on_any_rank_of_a_group_ends_the_job(tmp_path, ranks, task, gr
 
 @pytest.mark.mpi
 def test_ed_job_on_groups_of_two_is_the_one_rank_job(tmp_path):
-    job = write_job(tmp_path, ED_JOB)
-    four = run_on_groups(job, tmp_path / "four", ranks=4, ranks_per_task=2)
-    assert four.returncode == 0, four.stderr
-    one = run_serial("run", job, "--output", str(tmp_path / "one"), "--quiet")
-    assert one.returncode == 0, one.stderr
-    xr.testing.assert_identical(reproducible_part(tmp_path / "one" / "groups_ed.nc"),
-                                reproducible_part(tmp_path / "four" / "groups_ed.nc"))
-    with xr.open_dataset(tmp_path / "four" / "groups_ed.nc") as ds:
+    four, one = run_grouped_and_serial(tmp_path, ED_JOB, ranks=4, ranks_per_task=2)
+    xr.testing.assert_identical(reproducible_part(one / "groups_ed.nc"), reproducible_part(four / "groups_ed.nc"))
+    with xr.open_dataset(four / "groups_ed.nc") as ds:
         assert ds.attrs["mpi_size"] == 4 and ds.attrs["ranks_per_task"] == 2
         assert (ds.rank_imbalance == 1.0).all() and ds.rank_imbalance.attrs["units"] == "1"
-    for path in (tmp_path / "one" / "tasks").glob("*.h5"):
-        one_arrays, four_arrays = snapshot_arrays(path), snapshot_arrays(tmp_path / "four" / "tasks" / path.name)
+    for path in (one / "tasks").glob("*.h5"):
+        one_arrays, four_arrays = snapshot_arrays(path), snapshot_arrays(four / "tasks" / path.name)
         assert one_arrays.keys() == four_arrays.keys() and one_arrays["diagnostics/rank_imbalance"].shape == (0,)
         for name, array in one_arrays.items():
             np.testing.assert_array_equal(array, four_arrays[name], err_msg=name)
@@ -114,13 +119,9 @@ def test_ed_job_on_groups_of_two_is_the_one_rank_job(tmp_path):
 
 @pytest.mark.mpi
 def test_deposition_runs_on_the_group_leader(tmp_path):
-    job = write_job(tmp_path, DEPOSITION_JOB)
-    two = run_on_groups(job, tmp_path / "two", ranks=2, ranks_per_task=2)
-    assert two.returncode == 0, two.stderr
-    one = run_serial("run", job, "--output", str(tmp_path / "one"), "--quiet")
-    assert one.returncode == 0, one.stderr
-    xr.testing.assert_identical(reproducible_part(tmp_path / "one" / "groups_deposition.nc"),
-                                reproducible_part(tmp_path / "two" / "groups_deposition.nc"))
+    two, one = run_grouped_and_serial(tmp_path, DEPOSITION_JOB, ranks=2, ranks_per_task=2)
+    xr.testing.assert_identical(reproducible_part(one / "groups_deposition.nc"),
+                                reproducible_part(two / "groups_deposition.nc"))
 
 
 @pytest.mark.mpi
@@ -156,22 +157,18 @@ def test_serial_task_records_a_unit_imbalance(method):
 
 @pytest.mark.mpi
 def test_ts_and_ed_job_on_groups_of_two(tmp_path):
-    job = write_job(tmp_path, TS_JOB)
-    four = run_on_groups(job, tmp_path / "four", ranks=4, ranks_per_task=2)
-    assert four.returncode == 0, four.stderr
-    one = run_serial("run", job, "--output", str(tmp_path / "one"), "--quiet")
-    assert one.returncode == 0, one.stderr
+    four, one = run_grouped_and_serial(tmp_path, TS_JOB, ranks=4, ranks_per_task=2)
     # TS decomposed over two ranks sums forces in another order: equal to round-off, same counts
-    one_rank, two_ranks = (reproducible_part(tmp_path / out / "groups_ts.nc") for out in ("one", "four"))
+    one_rank, two_ranks = (reproducible_part(out / "groups_ts.nc") for out in (one, four))
     xr.testing.assert_allclose(one_rank, two_ranks, rtol=1e-9, atol=1e-12)
     for name in ("n_events", "n_collisions", "n_minimisations", "n_minimiser_iterations", "n_wall_reflections"):
         assert (one_rank[name] == two_ranks[name]).all(), name
-    with xr.open_dataset(tmp_path / "four" / "groups_ts.nc") as ds:
+    with xr.open_dataset(four / "groups_ts.nc") as ds:
         ts, ed = ds.sel({"method": "ts"}), ds.sel({"method": "ed"})
         assert (ds.n_clusters == 1).all() and (ds.n_collisions == 63).all()
         assert (ts.n_minimisations > 0).all() and (ed.rank_imbalance == 1.0).all()
         assert np.isfinite(ts.rank_imbalance).all() and (ts.rank_imbalance >= 1.0).all()
-    for path in (tmp_path / "four" / "tasks").glob("*.h5"):
+    for path in (four / "tasks").glob("*.h5"):
         with h5py.File(path) as task:
             imbalance = task["diagnostics/rank_imbalance"][:]
             if task.attrs["method"] == "ts":
