@@ -5,6 +5,9 @@
                                               K ranks run each task together (default 1)
     parsim validate JOB                       check a job file, compute nothing
     parsim info OUTPUT                        what an output folder holds and how far its job got
+    parsim plot OUTPUT [--figure NAME] [--out PATH] [--task LABEL]
+                                              the papers' figures from a job's outputs, PNG and PDF
+                                              (default: every figure the dataset supports, in OUTPUT/figures)
 
 Errors a user can cause are printed as one line, without a traceback, with a
 non-zero exit status.
@@ -39,9 +42,19 @@ def main(argv: list[str] | None = None) -> int:
     info = commands.add_parser("info", help="describe an output folder")
     info.add_argument("output", type=Path, help="output folder of a job")
 
+    plot = commands.add_parser("plot", help="draw figures of a job's outputs as PNG and PDF")
+    plot.add_argument("output", type=Path, help="output folder of a job, or its netCDF dataset")
+    plot.add_argument("--figure", metavar="NAME",
+                      help="draw this figure only (default: every figure the dataset supports, in OUTPUT/figures)")
+    plot.add_argument("--out", type=Path, metavar="PATH",
+                      help="with --figure: the file to write, PATH.png and PATH.pdf (or PATH itself if it ends in "
+                           ".png or .pdf, and the other format); without: the folder for every figure")
+    plot.add_argument("--task", metavar="LABEL",
+                      help="the task the pictures show (sediment, cluster), e.g. p0003_r0001; default: the first")
+
     args = parser.parse_args(argv)
     try:
-        return {"run": _run, "validate": _validate, "info": _info}[args.command](args)
+        return {"run": _run, "validate": _validate, "info": _info, "plot": _plot}[args.command](args)
     except ParsimError as error:
         _print_error(str(error))
         return EXIT_USER_ERROR
@@ -78,6 +91,13 @@ def _info(args) -> int:
     from parsim.report import describe_output
 
     print(describe_output(args.output))
+    return 0
+
+
+def _plot(args) -> int:
+    from parsim.plots import plot_output
+
+    plot_output(args.output, figure=args.figure, out=args.out, task=args.task)
     return 0
 
 

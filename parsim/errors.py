@@ -1,4 +1,4 @@
-"""The two kinds of failure parsim reports.
+"""The kinds of failure parsim reports.
 
 - :class:`JobError`: something the user can fix (a bad job file, an impossible
   geometry, a missing file).  The message names the field and the allowed values;
@@ -6,6 +6,8 @@
 - :class:`NumericalError`: a computation went wrong (NaN, an event limit that
   makes the result meaningless, a broken invariant).  It is raised with the task
   it happened in and is never silently accepted.
+- :class:`PlotError`: ``parsim plot`` was asked for a figure that the job's
+  outputs cannot give (a missing variable or task file); reported like a JobError.
 """
 
 
@@ -19,3 +21,7 @@ class JobError(ParsimError):
 
 class NumericalError(ParsimError):
     """A numerical failure inside a task."""
+
+
+class PlotError(ParsimError):
+    """A figure the outputs cannot give; the message names the missing variable, dimension or file."""

@@ -1,0 +1,105 @@
+"""``parsim plot``: the papers' figures from a job's outputs, as PNG and PDF.
+
+:data:`FIGURES` maps each figure's name to its :class:`~parsim.plots.common.FigureSpec`
+(drawing function and needs); :func:`plot_output` draws one figure or every figure a
+dataset supports.  Figures of statistics read the job's netCDF dataset; pictures of
+configurations (``sediment``, ``cluster``) also read one task file.  Only ``parsim plot``
+imports this package, so running jobs never needs matplotlib.
+"""
+
+import tomllib
+from pathlib import Path
+from typing import Callable
+
+import xarray as xr
+
+from parsim.errors import PlotError
+from parsim.output.folder import JOB_COPY, TASKS, OutputFolder
+from parsim.plots import aggregation, deposition
+from parsim.plots.common import FigureSpec, save
+
+FIGURES_BY_KIND = {"aggregation": aggregation.FIGURES, "deposition": deposition.FIGURES}
+FIGURES: dict[str, FigureSpec] = {name: spec for figures in FIGURES_BY_KIND.values() for name, spec in figures.items()}
+FIGURE_FOLDER = "figures"
+
+
+def plot_output(output: Path, figure: str | None = None, out: Path | None = None, task: str | None = None,
+                report: Callable[[str], None] = print) -> list[Path]:
+    """Draw figure ``figure`` of ``output`` (a job's output folder or its dataset), or every
+    figure its dataset supports.
+
+    ``out``: with ``figure``, the file to write (see :func:`parsim.plots.common.image_paths`),
+    by default OUTPUT/figures/NAME; without, the folder for every figure, by default
+    OUTPUT/figures.  ``task`` is the label of the task pictured (default: the first).
+    Figures whose needs the outputs lack are skipped with one reported line each, unless
+    ``figure`` asks for one: then :class:`PlotError` says what is missing.  Returns the files written.
+    """
+    dataset_path, tasks = _locate(Path(output))
+    dataset = _open(dataset_path)
+    folder = dataset_path.parent / FIGURE_FOLDER
+    if figure is not None:
+        spec = _lookup(figure)
+        return _draw(spec, dataset, tasks, task, Path(out) if out is not None else folder / spec.name, report)
+    folder = Path(out) if out is not None else folder
+    written = []
+    for spec in FIGURES_BY_KIND.get(dataset.attrs.get("job_kind"), FIGURES).values():
+        missing = spec.missing(dataset)
+        if missing:
+            report(f"skipped {spec.name}: the dataset lacks {'; '.join(missing)}")
+            continue
+        try:
+            written += _draw(spec, dataset, tasks, task, folder / spec.name, report)
+        except PlotError as error:  # a picture without its task file
+            report(f"skipped {spec.name}: {error}")
+    return written
+
+
+def _draw(spec: FigureSpec, dataset: xr.Dataset, tasks: Path, task: str | None, target: Path,
+          report: Callable[[str], None]) -> list[Path]:
+    arguments = (dataset, _task_file(tasks, task)) if spec.picture else (dataset,)
+    paths = save(spec.draw(*arguments), target)
+    report(f"{spec.name}: {' and '.join(map(str, paths))}")
+    return paths
+
+
+def _lookup(name: str) -> FigureSpec:
+    if name not in FIGURES:
+        allowed = "; ".join(f"{kind}: {', '.join(figures)}" for kind, figures in FIGURES_BY_KIND.items())
+        raise PlotError(f"unknown figure {name!r}; allowed: {allowed}")
+    return FIGURES[name]
+
+
+def _locate(output: Path) -> tuple[Path, Path]:
+    """The dataset and the task folder of a job's output folder, or of its dataset file."""
+    if output.is_file():
+        return output, output.parent / TASKS
+    job_copy = output / JOB_COPY
+    if not job_copy.exists():
+        raise PlotError(f"{output} is neither a netCDF dataset nor a parsim output folder (no {JOB_COPY} in it)")
+    name = tomllib.loads(job_copy.read_text()).get("name", "")
+    folder = OutputFolder(output, name)
+    if not folder.dataset.exists():
+        raise PlotError(f"no dataset {folder.dataset}: it is written when every task has finished "
+                        f"(parsim info {output} says how far the job got)")
+    return folder.dataset, folder.tasks
+
+
+def _open(path: Path) -> xr.Dataset:
+    try:
+        with xr.open_dataset(path) as dataset:
+            return dataset.load()
+    except (OSError, ValueError) as error:
+        raise PlotError(f"cannot read {path} as a netCDF dataset: {error}") from None
+
+
+def _task_file(tasks: Path, label: str | None) -> Path:
+    """The task file pictured: ``label``'s, or the first one."""
+    if label is not None:
+        path = tasks / f"{label}.h5"
+        if not path.exists():
+            raise PlotError(f"no task file {path}; --task takes a label such as p0000_r0000 (the files in {tasks})")
+        return path
+    files = sorted(tasks.glob("p*_r*.h5"))
+    if not files:
+        raise PlotError(f"the pictures need task files, and {tasks} holds none")
+    return files[0]
