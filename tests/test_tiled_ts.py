@@ -74,3 +74,12 @@ def test_a_3d_task_on_2_ranks_is_the_serial_run(tmp_path):
     assert np.array_equal(two["links"], serial.links[order])
     assert np.array_equal(two["cluster"], serial.cluster)
     assert np.abs(two["positions"] - serial.positions).max() <= POSITION_TOLERANCE_RADII * float(two["radius"])
+
+
+@pytest.mark.parametrize("ranks", [2, 4])
+def test_crowded_spheres_move_the_tile_blocks(ranks):
+    """All spheres in a third of the box: after one redistribute every rank owns about as many
+    (max / mean below REBALANCE_ABOVE), none lost, none changed."""
+    done = run_mpi([str(REPOSITORY / "tests" / "scripts" / "rebalance_probe.py")], ranks=ranks)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK"), done.stdout
