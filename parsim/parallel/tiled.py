@@ -36,8 +36,8 @@ from parsim.parallel.decomposition import Decomposition
 from parsim.parallel.halo import HaloPlan
 from parsim.parallel.migration import migrate
 
-#: Most tiles per side: enough to balance a few hundred ranks per axis, few enough that
-#: balancing and ownership stay cheap.
+#: Most tiles per side (so at most 64 ranks along an axis): blocks fine enough to balance,
+#: few enough that balancing and ownership stay cheap.
 MAX_TILES_PER_SIDE = 64
 #: Tiles are at least this many halo widths wide, leaving room for the halo to grow.
 TILE_WIDTH_IN_HALOS = 2.0
