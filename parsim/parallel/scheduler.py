@@ -34,6 +34,8 @@ from mpi4py import MPI
 REQUEST_TAG = 1
 REPLY_TAG = 2
 NO_MORE_TASKS = -1
+#: Pause between printing a failure and MPI_Abort: without it mpiexec lost the message in 1 of 8 runs.
+ABORT_GRACE_SECONDS = 0.5
 POLL_SECONDS = 1e-3  # how often rank 0's server thread looks for requests, and a group member for its next task
 
 
@@ -212,4 +214,5 @@ def _fail(comm: MPI.Comm, message: str) -> None:
         raise TaskFailed(message)
     sys.stdout.flush()
     print(f"\nparsim: error: {message}", file=sys.stderr, flush=True)
+    time.sleep(ABORT_GRACE_SECONDS)  # let mpiexec forward the message before MPI_Abort kills the ranks
     comm.Abort(1)
