@@ -280,3 +280,22 @@ def test_stiff_contacts_do_not_throw_spheres_away(monkeypatch):
         moved[limit] = np.linalg.norm(problem.positions - x, axis=1).max()
     assert moved[math.inf] > 50 * R, "the test no longer shows the instability"
     assert moved[limited] < 10 * R
+
+
+def test_a_minimisation_that_throws_a_sphere_is_reported(monkeypatch):
+    """A sphere moved more than MAX_DISPLACEMENT radii by one minimisation stops the run with a
+    MinimiserFailure naming the time step, instead of going on with a teleported sphere."""
+    honest = stepper.minimise
+
+    def throwing(problem, *args, **kwargs):
+        outcome = honest(problem, *args, **kwargs)
+        problem.positions[0] += 2 * stepper.MAX_DISPLACEMENT * R
+        return outcome
+
+    monkeypatch.setattr(stepper, "minimise", throwing)
+    n = 100
+    rng = np.random.default_rng(2)
+    L = box_length_for_volume_fraction(n, 2, R, 0.3)
+    with pytest.raises(stepper.MinimiserFailure, match=r"moved a sphere by more than .*time step 1 "):
+        simulate_ts(lattice_positions(n, 2, L, rng), isotropic_velocities(n, 2, 1.0, rng), np.full(n, R), np.ones(n),
+                    L, time_step_factor=0.05)

@@ -22,7 +22,7 @@ POSITION_TOLERANCE_RADII = 1e-9
 
 
 def run_probe(tmp_path, ranks, *task):
-    out = tmp_path / f"ranks{ranks}.npz"
+    out = tmp_path / f"ranks{ranks}_{len(task)}.npz"
     done = run_mpi([PROBE, str(out), *map(str, task)], ranks=ranks)
     assert done.returncode == 0, done.stdout + done.stderr
     return np.load(out)
@@ -46,6 +46,9 @@ def test_a_fixed_seed_task_is_the_same_on_1_2_and_4_ranks(tmp_path):
     assert one["counters"][1] == 399, "the run should end with a single cluster"
     assert_same_run(two, one)
     assert_same_run(four, one)
+    # a first halo margin of R / 4: minimisations leave their halo and run again with a wider one
+    retried = run_probe(tmp_path, 2, *task, 3, 2, 0.25)
+    assert_same_run(retried, one)
     assert np.all(one["imbalance"] == 1.0) and np.all(four["imbalance"] >= 1.0)
 
 

@@ -1,6 +1,9 @@
 """Run one fixed-seed TS aggregation decomposed over every rank and write what it ended with.
 
-    mpiexec -n K python tests/scripts/tiled_ts_probe.py OUT.npz N VOLUME_FRACTION [SEED [DIMENSION]]
+    mpiexec -n K python tests/scripts/tiled_ts_probe.py OUT.npz N VOLUME_FRACTION [SEED [DIMENSION [HALO_MARGIN]]]
+
+HALO_MARGIN (in radii) replaces the stepper's first halo margin: a small one makes
+minimisations leave their halo and run again with a wider one.
 
 Rank 0 writes the final positions, velocities, cluster labels, links (sorted) and counters
 to OUT.npz; tests/test_tiled_ts.py compares the files of 1, 2 and 4 ranks.
@@ -13,7 +16,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
-from parsim.core.ts import simulate_ts
+from parsim.core.ts import simulate_ts, stepper
 from parsim.parallel.tiled import DecomposedDomain
 
 RADIUS = 0.2
@@ -45,6 +48,8 @@ def main(out, n, volume_fraction, seed=3, dimension=2):
 
 if __name__ == "__main__":
     try:
+        if len(sys.argv) > 6:
+            stepper.HALO_MARGIN = float(sys.argv[6])
         main(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), *map(int, sys.argv[4:6]))
     except Exception:  # noqa: BLE001 - one failing rank must end every rank, with its traceback
         traceback.print_exc()
