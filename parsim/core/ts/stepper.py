@@ -135,9 +135,10 @@ class _Run:
     def advect(self, dt):
         """Step 1: free flight, then the whole-cluster wall reflection; returns the reflections made."""
         self.X += dt * self.V
-        where, extent = wall_overruns(self.X, self.R, self.cluster[self.global_id], self.L)
+        own_cluster = self.cluster[self.global_id]
+        where, extent = wall_overruns(self.X, self.R, own_cluster, self.L)
         where, shift, sign = reflections(self.domain.gather(where), self.domain.gather(extent), self.L)
-        apply_reflections(self.X, self.V, self.cluster[self.global_id], where, shift, sign)
+        apply_reflections(self.X, self.V, own_cluster, where, shift, sign)
         self.global_id, self.X, self.V = self.domain.redistribute(self.global_id, self.X, self.V)
         self.R = self.R_all[self.global_id]
         return where.shape[0]
@@ -208,9 +209,8 @@ class _Run:
             raise MinimiserFailure(f"time step {step} (t = {time:.6g}): the link set still changed after "
                                    f"{MAX_LINK_ROUNDS} rounds of minimisation (step 2e)")
         made = np.concatenate(made)
-        involved = involved_spheres(self.cluster, self.n_clusters, made)
         labels, m = merge_clusters(self.cluster, self.n_clusters, made)
-        merged = np.unique(labels[involved])
+        merged = np.unique(labels[made[:, 0]])  # every merged cluster holds an end of a new link
         own_labels = labels[self.global_id]  # step 3, eq. 2.9
         sums = self.domain.sum_array(cluster_momenta(self.V, self.m_all[self.global_id], own_labels, merged))
         set_cluster_velocities(self.V, own_labels, merged, sums)
@@ -244,19 +244,22 @@ class _Run:
         self.n_minimisations += 1
         self.n_iterations += outcome.iterations
         self.max_iterations = max(self.max_iterations, outcome.iterations)
-        where = (f"time step {step} (t = {time:.6g}), {int(self.domain.sum(problem.n_moving))} moving spheres, "
-                 f"{int(self.domain.sum(problem.n_links))} links")
+
+        def where():  # collective: every rank reports the same failure
+            return (f"time step {step} (t = {time:.6g}), {int(self.domain.sum(problem.n_moving))} moving spheres, "
+                    f"{int(self.domain.sum(problem.n_links))} links")
+
         if not outcome.finite:
-            raise MinimiserFailure(f"DAHA produced a non-finite position at iteration {outcome.iterations}, {where}")
+            raise MinimiserFailure(f"DAHA produced a non-finite position at iteration {outcome.iterations}, {where()}")
         moved = self.domain.max(float(np.sqrt(((problem.positions[:problem.n_moving] - self.X[moving]) ** 2)
                                               .sum(axis=1)).max()) if moving.size else 0.0)
         if outcome.left_halo or moved > self.max_displacement:
             raise MinimiserFailure(f"DAHA moved a sphere by more than {self.max_displacement:g} ({MAX_DISPLACEMENT:g} "
                                    f"largest radii) at iteration {outcome.iterations}: the iteration went "
-                                   f"unstable, {where}")
+                                   f"unstable, {where()}")
         if not outcome.converged:
             raise MinimiserFailure(
-                f"DAHA did not converge in {outcome.iterations} iterations, {where}: mean overlap "
+                f"DAHA did not converge in {outcome.iterations} iterations, {where()}: mean overlap "
                 f"{outcome.mean_overlap:.3g} (eps_c {self.daha.overlap_tolerance:g}), deepest overlap "
                 f"{outcome.max_overlap:.3g} (eps_max {self.daha.max_overlap_tolerance:g}), last step "
                 f"{outcome.max_step:.3g} (eps_s {self.daha.steadiness_tolerance:g})")
