@@ -315,7 +315,23 @@ def _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost,
             count = _wake_ghost_partners(g, first_ghost, is_awake, ghost_ptr, ghost_partner, woken, count)
     if count == 0:
         return awake
-    return np.sort(np.concatenate((awake, woken[:count])))
+    return _merged(awake, np.sort(woken[:count]))
+
+
+@jit
+def _merged(a, b):
+    """The sorted union of the sorted, disjoint arrays ``a`` and ``b`` (cheaper than sorting
+    their concatenation when ``b`` is short)."""
+    out = np.empty(a.shape[0] + b.shape[0], dtype=a.dtype)
+    i = j = 0
+    for k in range(out.shape[0]):
+        if j == b.shape[0] or (i < a.shape[0] and a[i] < b[j]):
+            out[k] = a[i]
+            i += 1
+        else:
+            out[k] = b[j]
+            j += 1
+    return out
 
 
 @jit
