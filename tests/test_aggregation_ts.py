@@ -222,7 +222,8 @@ def test_time_step_grows_to_twice_the_initial_one():
     dt = np.diff(np.concatenate([[0.0], result.time_history]))
     dt0 = 0.01 * length / np.abs(np.linalg.norm(v, axis=1)).max()
     assert dt[0] == pytest.approx(dt0)
-    expected = dt0 * (1 + (64 - np.concatenate([[64], result.cluster_history[:-1]])) / 63)
+    clusters_before = np.concatenate([[64], result.cluster_history[:-1]])
+    expected = dt0 * (1 + np.log(64 / clusters_before) / np.log(64))  # 2 dt0 would be reached at one cluster
     assert np.allclose(dt, expected, rtol=1e-12)
     assert result.cluster_history[-1] == 1
 

@@ -71,7 +71,7 @@ PARAMETERS = (
     Parameter("box_levels", int, 12, "1", "box-counting levels m = 1..box_levels, eps_m = L / 2^m (eq. 4.8)",
               low=2, high=30, sweepable=False),
     _ts("time_step_factor", float, 0.005, "1", "dt(0) = factor L / max|V| (Table 1: 0.005, 0.01, 0.015); "
-        "dt grows linearly with the merges done to 2 dt(0) at one cluster", low=0.0, low_inclusive=False),
+        "dt grows as ln(mean cluster size) to 2 dt(0) at one cluster", low=0.0, low_inclusive=False),
     _ts("formulation", str, "almost_rigid", "1", "'almost_rigid' (section 3.3: tiles, local attraction) or "
         "'non_rigid' (section 3.1: whole interacting clusters move)", choices=FORMULATIONS),
     _ts("attraction_range", float, 4.0, "1", "Delta_W of eq. 3.30 in units of R (almost_rigid)",
