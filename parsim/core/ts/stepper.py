@@ -209,9 +209,11 @@ class _Run:
         made = [new]
         self.links.add(new[:, 0], new[:, 1], step)
         start = self.X.copy()
+        drift = 0.0  # how far any sphere has moved since the step's free flight
         for _ in range(MAX_LINK_ROUNDS):
-            moving = self._minimise(np.concatenate(made), made[-1], step, time, self._drift(start))
-            _, ids, X = self._with_ghosts(self.contact + self._drift(start))
+            moving = self._minimise(np.concatenate(made), made[-1], step, time, drift)
+            drift = self._drift(start)
+            _, ids, X = self._with_ghosts(self.contact + drift)
             touching = unlinked_contacts(X, self.R_all[ids], moving, self.grid_side, self.grid_k, ids,
                                          self.links.head, self.links.next, self.links.to)
             fresh = self._shared_pairs(touching, ids, n_owned)
