@@ -96,10 +96,29 @@ def unlinked_contacts(X, R, moved, side, k, global_id, link_head, link_next, lin
 def candidate_pairs(P, R, n_moving, reach):
     """Local pairs ``a < b`` with a moving end and a gap of at most ``reach`` (the candidates).
 
-    ``P`` are local positions, the first ``n_moving`` moving; the cell grid covers their
-    bounding box only.  Returns ``(pair_a, pair_b)``, sorted by ``(a, b)``.
+    ``P`` are local positions, the first ``n_moving`` moving.  Returns ``(pair_a, pair_b)``,
+    sorted by ``(a, b)``.
     """
-    if P.shape[0] < 2 or n_moving == 0:
+    return _pairs_of(P, R, np.arange(n_moving), n_moving, reach)
+
+
+def updated_candidate_pairs(P, R, n_moving, reach, pair_a, pair_b, moved):
+    """The candidates after the rows flagged in ``moved`` have moved: the pairs ``(pair_a,
+    pair_b)`` (sorted) with no moved end, and the pairs of the moved rows searched afresh.
+
+    This is a Verlet list refreshed sphere by sphere.  If every sphere stays within ``h`` of
+    where its pairs were last searched and ``3 h <= reach``, a pair missing from the list had
+    a gap above ``reach`` when it was last searched and has come at most ``3 h`` closer since:
+    it does not touch.
+    """
+    fresh_a, fresh_b = _pairs_of(P, R, np.flatnonzero(moved), n_moving, reach)
+    return _merge_kept(pair_a, pair_b, moved, fresh_a, fresh_b)
+
+
+def _pairs_of(P, R, queries, n_moving, reach):
+    """Pairs ``a < b``, sorted, with an end in ``queries``, a moving end and a gap of at most
+    ``reach``; the cell grid covers the bounding box of ``P`` only."""
+    if P.shape[0] < 2 or queries.size == 0:
         empty = np.empty(0, dtype=np.int64)
         return empty, empty
     lower = P.min(axis=0)
@@ -108,18 +127,54 @@ def candidate_pairs(P, R, n_moving, reach):
     cutoff = 2.0 * float(R.max()) + reach
     k, side = grid_size(max(extent, cutoff), cutoff, P.shape[1], P.shape[0])
     # anchors are not queries: anchor pairs are seen from their moving end only
-    pairs = _near_pairs(shifted, R, np.arange(n_moving), np.arange(P.shape[0]), reach, side, k)
-    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
-    return np.ascontiguousarray(pairs[order, 0]), np.ascontiguousarray(pairs[order, 1])
+    pairs = _near_pairs(shifted, R, queries, np.arange(P.shape[0]), reach, side, k)
+    a, b = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
+    keep = a < n_moving
+    a, b = a[keep], b[keep]
+    order = np.lexsort((b, a))
+    return np.ascontiguousarray(a[order]), np.ascontiguousarray(b[order])
 
 
+@jit
+def _merge_kept(pair_a, pair_b, moved, fresh_a, fresh_b):
+    """The sorted union of the pairs with no end in ``moved`` and the sorted fresh pairs
+    (which all have an end in ``moved``, so the two sets are disjoint)."""
+    n = pair_a.shape[0] + fresh_a.shape[0]
+    out_a = np.empty(n, dtype=np.int64)
+    out_b = np.empty(n, dtype=np.int64)
+    count = 0
+    f = 0
+    for p in range(pair_a.shape[0]):
+        if moved[pair_a[p]] or moved[pair_b[p]]:
+            continue
+        while f < fresh_a.shape[0] and (fresh_a[f], fresh_b[f]) < (pair_a[p], pair_b[p]):
+            out_a[count], out_b[count] = fresh_a[f], fresh_b[f]
+            count += 1
+            f += 1
+        out_a[count], out_b[count] = pair_a[p], pair_b[p]
+        count += 1
+    while f < fresh_a.shape[0]:
+        out_a[count], out_b[count] = fresh_a[f], fresh_b[f]
+        count += 1
+        f += 1
+    return out_a[:count].copy(), out_b[:count].copy()
+
+
+@jit
 def incidence(pair_a, pair_b, n_moving):
-    """CSR lists of the pairs incident to each moving sphere: ``(ptr, pair_of)``."""
-    ends = np.concatenate([pair_a, pair_b])
-    ids = np.concatenate([np.arange(pair_a.size), np.arange(pair_b.size)])
-    keep = ends < n_moving
-    ends, ids = ends[keep], ids[keep]
-    order = np.argsort(ends, kind="stable")
+    """CSR lists of the pairs incident to each moving sphere, in pair order: ``(ptr, pair_of)``."""
     ptr = np.zeros(n_moving + 1, dtype=np.int64)
-    np.add.at(ptr, ends + 1, 1)
-    return np.cumsum(ptr), np.ascontiguousarray(ids[order], dtype=np.int64)
+    for p in range(pair_a.shape[0]):
+        for end in (pair_a[p], pair_b[p]):
+            if end < n_moving:
+                ptr[end + 1] += 1
+    for i in range(n_moving):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    pair_of = np.empty(ptr[n_moving], dtype=np.int64)
+    for p in range(pair_a.shape[0]):
+        for end in (pair_a[p], pair_b[p]):
+            if end < n_moving:
+                pair_of[fill[end]] = p
+                fill[end] += 1
+    return ptr, pair_of

@@ -92,6 +92,25 @@ them made a clump converge eight times slower.  A configuration where nothing mo
 fixed point of both iterations, the stopping conditions are tested on full sweeps only, and
 every decision is local to a sphere and its partners, so the iteration still splits among
 tiles and ranks.
+
+Polishing (ours, with sleeping spheres).  Once a full sweep finds (3.27) and (3.28) met, the
+paper would stop; only our deepest-overlap bound may still fail.  From then on the full
+sweeps stop: at each check the spheres that moved more than ``sleep_tolerance`` or overlap a
+partner by more than ``eps_max`` stay awake with their partners, everything else sleeps until
+a partner wakes it, and the stopping conditions are tested on the current positions (the
+constraint values of sleeping pairs have not changed).  The deep pairs are then resolved
+locally.  Before, the full sweeps kept waking the spheres that creep at about 1e-4 per
+iteration under stretched links.  They made new short-lived deep overlaps elsewhere, and in a
+minimisation of 84 000 spheres 187 different pairs passed ``eps_max`` in turn: 6913 iterations
+instead of about 2000 (docs/benchmarks.md).  Polishing ends, and the full sweeps resume, if the mean
+overlap rises above ``eps_c``.
+
+Candidate pairs.  The pairs that can touch are those with a gap of at most ``problem.reach``.
+They are kept as a Verlet list refreshed sphere by sphere: once a sphere is ``REFRESH_DRIFT``
+reach from where its pairs were last searched, the pairs of every sphere more than
+``REFRESH_SET`` of that away are searched again
+(:func:`parsim.core.ts.contacts.updated_candidate_pairs`).  A few fast spheres then no longer
+cost a search over all pairs.
 """
 
 import math
@@ -107,6 +126,11 @@ OVERLAP_FLOOR = 1e-9
 STABILITY_MARGIN = 0.5
 #: A sphere's kick is scaled down when delta^2 times its stiffness exceeds this (module docstring).
 STIFFNESS_LIMIT = 2.0
+#: Once a moving sphere is this fraction of the candidate reach away from where its pairs were
+#: last searched, its pairs are searched again (contacts.updated_candidate_pairs needs <= 1/3) ...
+REFRESH_DRIFT = 1.0 / 3.0
+#: ... and so are those of every sphere more than this fraction of that distance away.
+REFRESH_SET = 0.5
 #: With sleeping spheres, every sphere is updated (and the stopping conditions tested) once
 #: in this many iterations.
 FULL_SWEEP_EVERY = 16
@@ -259,15 +283,6 @@ def _constraint_values(P, R, pair_a, pair_b, phi):
 
 
 @jit
-def _constraint_values_near(P, R, awake, pair_ptr, pair_of, pair_a, pair_b, phi):
-    """``phi`` of the pairs with an awake end; the others did not move."""
-    for i in awake:
-        for e in range(pair_ptr[i], pair_ptr[i + 1]):
-            p = pair_of[e]
-            phi[p] = _phi(P, R, pair_a[p], pair_b[p])
-
-
-@jit
 def _wake_partners(i, n_moving, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, woken, count):
     """Wake the moving partners (links and candidate pairs) of sphere ``i``; returns the new count."""
     for e in range(link_ptr[i], link_ptr[i + 1]):
@@ -406,27 +421,30 @@ def _largest_step(P, previous):
 
 
 @jit
-def _update_multipliers(phi, pair_a, pair_b, lam, rate, damping_of, stable):
-    """Eq. 3.24 (3.31 in the almost-rigid form: the pairs are the tile's), the rate kept below
+def _update_multipliers(P, R, phi, pair_a, pair_b, lam, rate, damping_of, stable):
+    """``phi`` (3.4) at ``P`` and eq. 3.24 (3.31 in the almost-rigid form: the pairs are the tile's), the rate kept below
     ``stable`` times the smaller damping of the pair's moving spheres (``damping_of`` is
     infinite on anchors).  The step is written out here and in the two kernels below: a
     shared jitted helper made a large minimisation 1.5x slower."""
     for p in range(pair_a.shape[0]):
+        phi[p] = _phi(P, R, pair_a[p], pair_b[p])
         c = min(damping_of[pair_a[p]], damping_of[pair_b[p]])
         value = lam[p] + min(rate, stable * c) * phi[p]
         lam[p] = value if value > 0.0 else 0.0
 
 
 @jit
-def _update_multipliers_near(phi, awake, is_awake, n_moving, pair_ptr, pair_of, pair_a, pair_b, lam, rate, damping_of,
-                             stable):
-    """Eq. 3.24 on the pairs with an awake end, each once; the pairs of two sleeping spheres sleep too."""
+def _update_multipliers_near(P, R, phi, awake, is_awake, n_moving, pair_ptr, pair_of, pair_a, pair_b, lam, rate,
+                             damping_of, stable):
+    """``phi`` and eq. 3.24 on the pairs with an awake end, each once; the pairs of two sleeping
+    spheres did not move and sleep too."""
     for i in awake:
         for e in range(pair_ptr[i], pair_ptr[i + 1]):
             p = pair_of[e]
             j = pair_b[p] if pair_a[p] == i else pair_a[p]
             if j < n_moving and is_awake[j] and j < i:
                 continue  # updated from its other end, j
+            phi[p] = _phi(P, R, pair_a[p], pair_b[p])
             c = min(damping_of[i], damping_of[j])
             value = lam[p] + min(rate, stable * c) * phi[p]
             lam[p] = value if value > 0.0 else 0.0
@@ -517,18 +535,24 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     awake = everyone
     is_awake = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghost rows as on their owner
     restless = np.zeros(P.shape[0], dtype=np.bool_)
+    moved = np.zeros(P.shape[0], dtype=np.bool_)  # whose candidate pairs are searched again
     sleep = params.sleep_tolerance
+    polishing = False
     iteration = 0
     while iteration < params.max_iterations:
         guarded = max(typical_overlap, floor)
-        full = sleep == 0.0 or iteration % FULL_SWEEP_EVERY == 0
-        if exchange.max(_largest_step(P, built_at)) > 0.5 * problem.reach:  # a pair may have come within reach
-            if exchange.max(_largest_step(P, start)) + 0.5 * problem.reach > exchange.margin:
+        check = sleep == 0.0 or iteration % FULL_SWEEP_EVERY == 0
+        full = check and not polishing
+        if exchange.max(_largest_step(P, built_at)) > REFRESH_DRIFT * problem.reach:  # a pair may come within reach
+            if exchange.max(_largest_step(P, start)) + REFRESH_DRIFT * problem.reach > exchange.margin:
                 return Outcome(False, iteration, mean_overlap, deepest, largest, True, lam, left_halo=True)
-            lam = problem.refresh_pairs(lam)
+            far = REFRESH_SET * REFRESH_DRIFT * problem.reach
+            moved[:n_moving] = np.sum((P[:n_moving] - built_at) ** 2, axis=1) > far * far
+            exchange.share(moved)
+            lam = problem.refresh_pairs(lam, moved)
             phi = np.empty(problem.pair_a.size)
-            built_at[:] = P[:n_moving]
-            full = True
+            _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
+            built_at[moved[:n_moving]] = P[:n_moving][moved[:n_moving]]
         if full:
             awake = everyone
         previous[:] = P[:n_moving]
@@ -545,12 +569,9 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
             exchange.share(damping_of)
         rate = delta * params.multiplier_rate * (math.sqrt(n_spheres) / guarded if params.dynamic else 1.0)
         if full:
-            _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
-            _update_multipliers(phi, problem.pair_a, problem.pair_b, lam, rate, damping_of, stable)
+            _update_multipliers(P, R, phi, problem.pair_a, problem.pair_b, lam, rate, damping_of, stable)
         else:
-            _constraint_values_near(P, R, awake, problem.pair_ptr, problem.pair_of, problem.pair_a, problem.pair_b,
-                                    phi)
-            _update_multipliers_near(phi, awake, is_awake, n_moving, problem.pair_ptr, problem.pair_of,
+            _update_multipliers_near(P, R, phi, awake, is_awake, n_moving, problem.pair_ptr, problem.pair_of,
                                      problem.pair_a, problem.pair_b, lam, rate, damping_of, stable)
             _update_cross_pairs_near(P, R, problem.cross_pairs, problem.pair_a, problem.pair_b, is_awake, phi, lam,
                                      rate, damping_of, stable)
@@ -559,7 +580,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
             on_iteration(iteration, problem)
         graph = (problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of, problem.pair_a, problem.pair_b,
                  problem.ghost_ptr, problem.ghost_partner)
-        if not full:
+        if not check:
             awake = _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, *graph, sleep)
             exchange.share(is_awake)
             continue
@@ -576,8 +597,10 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
                 and deepest <= params.max_overlap_tolerance):
             return Outcome(True, iteration, mean_overlap, deepest, largest, True, lam)
         if sleep > 0.0:
-            _restless(P, previous, phi, problem.pair_ptr, problem.pair_of, sleep, params.overlap_tolerance**2,
-                      restless)
+            polishing = ((polishing or largest <= params.steadiness_tolerance)
+                         and mean_overlap <= params.overlap_tolerance)
+            restless_overlap = params.max_overlap_tolerance if polishing else params.overlap_tolerance
+            _restless(P, previous, phi, problem.pair_ptr, problem.pair_of, sleep, restless_overlap**2, restless)
             exchange.share(restless)
             awake = _settle(restless, U, is_awake, first_ghost, *graph)
             exchange.share(is_awake)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsim.core.jit import jit
-from parsim.core.ts.contacts import candidate_pairs, incidence
+from parsim.core.ts.contacts import candidate_pairs, incidence, updated_candidate_pairs
 from parsim.core.ts.links import link_index
 
 
@@ -61,11 +61,17 @@ class Problem:
     ghost_ptr: np.ndarray = None
     ghost_partner: np.ndarray = None
 
-    def refresh_pairs(self, multipliers=None):
-        """Recompute the candidate pairs at the current positions; returns their multipliers
-        (those of pairs that stay candidates are kept, new pairs start at 0)."""
-        old_keys = None if self.pair_a is None else self.pair_a * self.positions.shape[0] + self.pair_b
-        self.pair_a, self.pair_b = candidate_pairs(self.positions, self.radii, self.n_moving, self.reach)
+    def refresh_pairs(self, multipliers=None, moved=None):
+        """Recompute the candidate pairs at the current positions, all of them or (``moved``, a
+        flag per member) only those of the moved members (:func:`updated_candidate_pairs`);
+        returns their multipliers (those of pairs that stay candidates are kept, new pairs
+        start at 0)."""
+        old_a, old_b = self.pair_a, self.pair_b
+        if moved is None:
+            self.pair_a, self.pair_b = candidate_pairs(self.positions, self.radii, self.n_moving, self.reach)
+        else:
+            self.pair_a, self.pair_b = updated_candidate_pairs(self.positions, self.radii, self.n_moving, self.reach,
+                                                               old_a, old_b, moved)
         self.pair_ptr, self.pair_of = incidence(self.pair_a, self.pair_b, self.n_moving)
         crossing = self.moving_ghost[self.pair_b]  # pair_a < n_moving <= pair_b for these
         self.cross_pairs = np.flatnonzero(crossing)
@@ -73,17 +79,27 @@ class Problem:
         self.ghost_ptr, self.ghost_partner = _ghost_partners(self.pair_a, self.pair_b, self.cross_pairs,
                                                              self.link_ptr, self.link_to, self.moving_ghost,
                                                              self.first_ghost)
-        kept = np.zeros(self.pair_a.size)
-        if multipliers is not None and old_keys.size:
-            keys = self.pair_a * self.positions.shape[0] + self.pair_b
-            where = np.minimum(np.searchsorted(old_keys, keys), old_keys.size - 1)
-            found = old_keys[where] == keys
-            kept[found] = multipliers[where[found]]
-        return kept
+        if multipliers is None:
+            return np.zeros(self.pair_a.size)
+        return _carried(old_a, old_b, multipliers, self.pair_a, self.pair_b)
 
     def pair_links(self, links):
         """Index in ``links`` of each candidate pair, -1 for a pair that is not linked."""
         return _pair_links(self.members, self.pair_a, self.pair_b, links.head, links.next, links.to)
+
+
+@jit
+def _carried(old_a, old_b, old_values, pair_a, pair_b):
+    """The value of each pair ``(pair_a, pair_b)`` in ``old_values`` over ``(old_a, old_b)``,
+    0 where it is new; both pair lists are sorted."""
+    values = np.zeros(pair_a.shape[0])
+    q = 0
+    for p in range(pair_a.shape[0]):
+        while q < old_a.shape[0] and (old_a[q], old_b[q]) < (pair_a[p], pair_b[p]):
+            q += 1
+        if q < old_a.shape[0] and old_a[q] == pair_a[p] and old_b[q] == pair_b[p]:
+            values[p] = old_values[q]
+    return values
 
 
 @jit

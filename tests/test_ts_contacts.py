@@ -1,0 +1,63 @@
+"""Candidate pairs of the DAHA minimiser: the Verlet list refreshed sphere by sphere."""
+
+import numpy as np
+import pytest
+
+from parsim.core.ts.contacts import candidate_pairs, incidence, updated_candidate_pairs
+from parsim.core.ts.daha import REFRESH_DRIFT, REFRESH_SET
+
+
+def brute_force_pairs(X, R, n_moving, gap):
+    """Pairs ``a < b`` with a moving end and ``|X_a - X_b| - R_a - R_b <= gap``, as a set."""
+    distance = np.linalg.norm(X[:, None] - X[None], axis=2) - (R[:, None] + R[None])
+    a, b = np.nonzero(np.triu(distance <= gap, k=1))
+    return {(i, j) for i, j in zip(a.tolist(), b.tolist()) if i < n_moving}
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_candidate_pairs_are_the_pairs_within_reach(d):
+    rng = np.random.default_rng(d)
+    n, n_moving, reach = 300, 250, 0.2
+    X = rng.uniform(0.0, 4.0, (n, d))
+    R = rng.uniform(0.15, 0.25, n)
+    a, b = candidate_pairs(X, R, n_moving, reach)
+    assert set(zip(a.tolist(), b.tolist())) == brute_force_pairs(X, R, n_moving, reach)
+    assert np.all(np.diff(a * n + b) > 0)  # sorted, each once
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_refreshing_the_moved_spheres_never_misses_a_contact(d):
+    """Spheres wander (the anchors stay); whenever one is REFRESH_DRIFT x reach from where its
+    pairs were searched, the pairs of those past REFRESH_SET of that are searched again, as
+    DAHA does.  Every touching pair stays a candidate; the refreshed spheres' pairs are exactly
+    those within reach, the others' pairs are kept."""
+    rng = np.random.default_rng(10 + d)
+    n, n_moving, reach = 300, 250, 0.2
+    X = rng.uniform(0.0, 4.0, (n, d))
+    R = rng.uniform(0.15, 0.25, n)
+    a, b = candidate_pairs(X, R, n_moving, reach)
+    searched_at = X[:n_moving].copy()
+    refreshes = 0
+    for _ in range(400):
+        X[:n_moving] += rng.normal(0.0, 0.01, (n_moving, d)) * rng.uniform(0.0, 1.0, (n_moving, 1)) ** 4
+        drift = np.linalg.norm(X[:n_moving] - searched_at, axis=1)
+        if drift.max() > REFRESH_DRIFT * reach:
+            moved = np.zeros(n, dtype=np.bool_)
+            moved[:n_moving] = drift > REFRESH_SET * REFRESH_DRIFT * reach
+            kept = {(i, j) for i, j in zip(a.tolist(), b.tolist()) if not (moved[i] or moved[j])}
+            a, b = updated_candidate_pairs(X, R, n_moving, reach, a, b, moved)
+            pairs = set(zip(a.tolist(), b.tolist()))
+            fresh = {(i, j) for i, j in brute_force_pairs(X, R, n_moving, reach) if moved[i] or moved[j]}
+            assert pairs == kept | fresh
+            assert np.all(np.diff(a * n + b) > 0)
+            searched_at[moved[:n_moving]] = X[:n_moving][moved[:n_moving]]
+            refreshes += 1
+        assert brute_force_pairs(X, R, n_moving, 0.0) <= set(zip(a.tolist(), b.tolist()))
+    assert refreshes > 5, "the spheres did not wander far enough to test the refresh"
+
+
+def test_incidence_lists_each_pair_at_its_moving_ends():
+    a = np.array([0, 0, 1, 2])
+    b = np.array([1, 3, 2, 3])  # sphere 3 is an anchor
+    ptr, pair_of = incidence(a, b, 3)
+    assert [sorted(pair_of[ptr[i]:ptr[i + 1]].tolist()) for i in range(3)] == [[0, 1], [0, 2], [2, 3]]
