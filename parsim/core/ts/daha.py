@@ -89,9 +89,9 @@ multipliers of pairs of two sleeping spheres, until a partner moves more than
 ``sleep_tolerance`` (it then wakes in the next iteration) or the next full sweep.  Spheres
 in deeper overlaps never sleep: their multipliers are what drives (3.28) down, and freezing
 them made a clump converge eight times slower.  A configuration where nothing moves is a
-fixed point of both iterations, the stopping conditions are tested on full sweeps only, and
-every decision is local to a sphere and its partners, so the iteration still splits among
-tiles and ranks.
+fixed point of both iterations, the stopping conditions are tested on full sweeps only (but
+see polishing below), and every decision is local to a sphere and its partners, so the
+iteration still splits among tiles and ranks.
 
 Polishing (ours, with sleeping spheres).  Once a full sweep finds (3.27) and (3.28) met, the
 paper would stop; only our deepest-overlap bound may still fail.  From then on the full
@@ -102,8 +102,8 @@ constraint values of sleeping pairs have not changed).  The deep pairs are then 
 locally.  Before, the full sweeps kept waking the spheres that creep at about 1e-4 per
 iteration under stretched links.  They made new short-lived deep overlaps elsewhere, and in a
 minimisation of 84 000 spheres 187 different pairs passed ``eps_max`` in turn: 6913 iterations
-instead of about 2000 (docs/benchmarks.md).  Polishing ends, and the full sweeps resume, if the mean
-overlap rises above ``eps_c``.
+instead of about 2000 (docs/benchmarks.md).  Polishing ends, and the full sweeps resume, if
+the mean overlap rises above ``eps_c``.
 
 Candidate pairs.  The pairs that can touch are those with a gap of at most ``problem.reach``.
 They are kept as a Verlet list refreshed sphere by sphere: once a sphere is ``REFRESH_DRIFT``
@@ -422,9 +422,9 @@ def _largest_step(P, previous):
 
 @jit
 def _update_multipliers(P, R, phi, pair_a, pair_b, lam, rate, damping_of, stable):
-    """``phi`` (3.4) at ``P`` and eq. 3.24 (3.31 in the almost-rigid form: the pairs are the tile's), the rate kept below
-    ``stable`` times the smaller damping of the pair's moving spheres (``damping_of`` is
-    infinite on anchors).  The step is written out here and in the two kernels below: a
+    """``phi`` (3.4) at ``P`` and eq. 3.24 (3.31 in the almost-rigid form: the pairs are the
+    tile's), the rate kept below ``stable`` times the smaller damping of the pair's moving
+    spheres (``damping_of`` is infinite on anchors).  The step is written out here and in the two kernels below: a
     shared jitted helper made a large minimisation 1.5x slower."""
     for p in range(pair_a.shape[0]):
         phi[p] = _phi(P, R, pair_a[p], pair_b[p])

@@ -35,7 +35,7 @@ def tiles_per_side(n_interacting, dimension, box_length, min_side):
 
 
 @jit
-def _tiles_of(X, rows, side, k):
+def _tile_indices(X, rows, side, k):
     tile = np.empty(rows.shape[0], dtype=np.int64)
     for r in range(rows.shape[0]):
         tile[r] = cell_index(X[rows[r]], side, k)
@@ -84,16 +84,16 @@ def _select(X, involved, active, side, k):
     return moving, anchors
 
 
-def seed_tiles(X, seeds, box_length, k):
-    """The tiles (flat indices, ``k`` per side) holding the rows ``seeds`` of ``X``."""
-    return _tiles_of(X, np.asarray(seeds, dtype=np.int64), box_length / k, k)
+def tiles_of(X, rows, box_length, k):
+    """The tiles (flat indices, ``k`` per side, x fastest) holding the rows ``rows`` of ``X``."""
+    return _tile_indices(X, np.asarray(rows, dtype=np.int64), box_length / k, k)
 
 
 def select_spheres(X, involved, active_tiles, box_length, k):
     """``(moving, anchors)``, sorted rows of ``X``, for ``k`` tiles per side.
 
     ``involved`` marks the spheres of the interacting clusters; ``active_tiles`` are the
-    tiles holding an end of a link made in this time step (:func:`seed_tiles`, over all
+    tiles holding an end of a link made in this time step (:func:`tiles_of`, over all
     processes).  With ``k = 1`` every involved sphere moves (the non-rigid formulation of
     section 3.1).
     """
