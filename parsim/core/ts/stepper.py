@@ -79,6 +79,9 @@ MAX_LINK_ROUNDS = 1000
 #: The quiet-step search examines pairs up to the gap the fastest pair closes in this many steps
 #: (doubling after each quiet stretch found, up to the most, back to the least after a link).
 QUIET_HORIZON_STEPS = (8, 1024)
+#: ... and at most the gap at which a search from the spheres outside the largest cluster
+#: examines about this many pairs per sphere of the run (the cost of a few contact searches).
+QUIET_PAIRS_PER_SPHERE = 64.0
 
 
 class MinimiserFailure(RuntimeError):
@@ -169,16 +172,26 @@ class _Run:
     def quiet_steps(self, dt):
         """How many of the next steps of length ``dt`` certainly make no link and no reflection."""
         fastest = self.fastest()
+        sizes = np.bincount(self.cluster, minlength=self.n_clusters)
+        largest = sizes.argmax()
         horizon = min(self.horizon_steps * 2.0 * fastest * dt, self.L / 4.0,
-                      self.domain.max_halo_width - self.contact)
+                      self.domain.max_halo_width - self.contact, self._affordable_horizon(self.n - sizes[largest]))
         halo, ids, X = self._with_ghosts(self.contact + horizon)
         V = np.concatenate([self.V, halo.exchange(self.V)])
         k, side = grid_size(self.L, self.contact + horizon, self.d, self.n)
-        largest = np.bincount(self.cluster, minlength=self.n_clusters).argmax()
         quiet = self.domain.min(quiet_steps(X, V, self.R_all[ids], self.cluster[ids], self.X.shape[0], largest,
                                             self.L, dt, fastest, horizon, side, k))
         self.horizon_steps = min(2 * self.horizon_steps, QUIET_HORIZON_STEPS[1]) if quiet > 0 else QUIET_HORIZON_STEPS[0]
         return quiet
+
+    def _affordable_horizon(self, n_queries):
+        """The largest horizon at which the quiet-step search from ``n_queries`` spheres looks at
+        about ``QUIET_PAIRS_PER_SPHERE`` pairs per sphere of the run (its ``3^d`` cells of side
+        ``contact + horizon`` hold ``n / L^d`` spheres per unit volume).  Two large clusters
+        searched up to L/4 cost 0.7 s per search at N = 102400, more than all the steps saved."""
+        per_query = QUIET_PAIRS_PER_SPHERE * self.n / max(n_queries, 1)
+        block_side = (per_query * self.L**self.d / self.n) ** (1.0 / self.d)
+        return max(block_side / 3.0 - self.contact, 0.0)
 
     def _shared_pairs(self, pairs, ids, n_owned):
         """Local pairs with an owned end, as global ids ``(min, max)``, from every process:
