@@ -142,6 +142,22 @@ def test_anchors_do_not_move():
     assert np.array_equal(problem.positions[2], anchor)
 
 
+@pytest.mark.parametrize("start, attracts", [(1.05, False), (0.95, True)])
+def test_attraction_range_is_taken_where_the_minimisation_starts(start, attracts):
+    """Eq. 3.30, Delta_W = 4R: disc A, linked to the anchor B at ``start`` Delta_W, is pushed
+    towards B by the overlapping disc C, to 0.96 Delta_W.  A link longer than Delta_W at the
+    start stays without pull (A stops there); a shorter one pulls A and C to B."""
+    delta_w = 4 * R
+    a = start * delta_w
+    problem, _ = problem_of([[a, 0.0], [0.0, 0.0], [a + 0.25, 0.0]], [(0, 1), (0, 2)], moving=[0, 2])
+    assert minimise(problem, PARAMS, attraction_range=delta_w).converged
+    distance = np.linalg.norm(problem.positions[0] - problem.positions[2])  # rows: moving A, C, then anchor B
+    if attracts:
+        assert abs(distance - 2 * R) < CONTACT_GAP
+    else:
+        assert distance == pytest.approx(a - (0.4 - 0.25) / 2, abs=0.01)
+
+
 def paper_system(n, volume_fraction, seed):
     rng = np.random.default_rng(seed)
     length = box_length_for_volume_fraction(n, 2, R, volume_fraction)

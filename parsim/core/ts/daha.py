@@ -496,17 +496,15 @@ def _initial_multipliers(P, R, pair_a, pair_b, initial):
     return lam
 
 
-def attraction_energy(problem, range_=math.inf):
-    """``W`` of eq. 3.5 (3.30 with ``range_ = Delta_W``) over the problem's links."""
+def attraction_energy(problem):
+    """``W`` of eq. 3.5 over the problem's links."""
     P = problem.positions
     energy = 0.0
     for i in range(problem.n_moving):
         for e in range(problem.link_ptr[i], problem.link_ptr[i + 1]):
             j = problem.link_to[e]
-            distance_sq = float(np.sum((P[i] - P[j]) ** 2))
-            if distance_sq <= range_**2:
-                # a link between two moving spheres is listed at both ends
-                energy += 0.5 * distance_sq * (0.5 if j < problem.n_moving else 1.0)
+            # a link between two moving spheres is listed at both ends
+            energy += 0.5 * float(np.sum((P[i] - P[j]) ** 2)) * (0.5 if j < problem.n_moving else 1.0)
     return energy
 
 
