@@ -37,7 +37,9 @@ class Problem:
     moving sphere in CSR form (``*_ptr`` of length ``n_moving + 1``); ``pair_a < pair_b``
     are local indices, ``pair_of`` lists the pairs incident to each moving sphere,
     ``link_to`` its linked partners.  Candidate pairs are those with a gap of at most
-    ``reach``; :meth:`refresh_pairs` recomputes them and the cross-pair bookkeeping:
+    ``reach`` when their spheres' pairs were last searched (the minimiser refreshes them
+    sphere by sphere, so that none that touches is missing); :meth:`refresh_pairs`
+    recomputes them and the cross-pair bookkeeping:
     ``pair_counted`` (the pairs this process counts in sums), ``cross_pairs``, and per
     moving ghost its local moving partners (``ghost_ptr``, ``ghost_partner``).
     """
