@@ -446,8 +446,8 @@ def _largest_step(P, previous):
 def _update_multipliers(P, R, phi, pair_a, pair_b, lam, rate, damping_of, stable):
     """``phi`` (3.4) at ``P`` and eq. 3.24 (3.31 in the almost-rigid form: the pairs are the
     tile's), the rate kept below ``stable`` times the smaller damping of the pair's moving
-    spheres (``damping_of`` is infinite on anchors).  The step is written out here and in the two kernels below: a
-    shared jitted helper made a large minimisation 1.5x slower."""
+    spheres (``damping_of`` is infinite on anchors).  The step is written out here and in the
+    two kernels below: a shared jitted helper made a large minimisation 1.5x slower."""
     for p in range(pair_a.shape[0]):
         phi[p] = _phi(P, R, pair_a[p], pair_b[p])
         c = min(damping_of[pair_a[p]], damping_of[pair_b[p]])
