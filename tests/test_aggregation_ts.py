@@ -9,7 +9,7 @@ import xarray as xr
 
 from parsim.comparison import markdown, method_comparison
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
-from parsim.core.ts import DahaParameters, daha, simulate_ts, stepper
+from parsim.core.ts import DahaParameters, daha, simulate_ts, stepper, tiles
 from parsim.core.ts.contacts import cross_cluster_contacts
 from parsim.core.ts.daha import FULL_SWEEP_EVERY, attraction_energy, minimise
 from parsim.core.ts.links import LinkSet
@@ -230,6 +230,16 @@ def test_almost_rigid_with_one_tile_is_the_non_rigid_method():
     non_rigid = simulate_ts(x, v, radii, masses, length, formulation="non_rigid")
     assert np.array_equal(one_tile.links, non_rigid.links)
     assert np.array_equal(one_tile.positions, non_rigid.positions)
+
+
+@pytest.mark.parametrize("n_interacting", [10, 5_000, 800_000])
+def test_later_rounds_use_tiles_of_two_interaction_ranges_or_finer(n_interacting):
+    box, least = 647.0, 0.8  # N = 10^6, V_f = 0.3, R = 0.2; Delta_W = 4 R
+    first = tiles.tiles_per_side(n_interacting, 2, box, least)
+    later = tiles.later_round_tiles_per_side(n_interacting, 2, box, least)
+    assert later >= first
+    assert box / later >= tiles.LATER_ROUND_TILE_WIDTHS * least
+    assert box / (later + 1) < tiles.LATER_ROUND_TILE_WIDTHS * least  # as fine as that allows
 
 
 def test_time_step_grows_to_twice_the_initial_one():

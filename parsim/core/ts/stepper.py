@@ -31,7 +31,8 @@ tiles are read as fixed anchors, and a link attracts only while its length is at
 
 Repeated rounds (step 2e).  The first minimisation of a time step moves the tiles holding
 the links made by free flight; each later round moves only the tiles holding the links the
-previous round made, with the clusters of all the step's links as the interacting ones.
+previous round made (finer tiles than the first round's: :mod:`parsim.core.ts.tiles`), with
+the clusters of all the step's links as the interacting ones.
 Everywhere else the previous round has converged and the new links are not felt (the
 attraction reaches ``Delta_W``, less than a tile), so re-solving it would change nothing
 but cost: at N = 102400 a time step took up to 30 rounds of 83 000 moving spheres, each
@@ -59,7 +60,7 @@ from parsim.core.ts.domain import SerialDomain
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import Ghosts, build_problem
 from parsim.core.ts.quiet import quiet_steps
-from parsim.core.ts.tiles import select_spheres, tiles_of, tiles_per_side
+from parsim.core.ts.tiles import later_round_tiles_per_side, select_spheres, tiles_of, tiles_per_side
 
 FORMULATIONS = ("almost_rigid", "non_rigid")
 STOP_REASONS = ("single_cluster", "max_time", "max_steps")
@@ -251,7 +252,8 @@ class _Run:
         moved.  ``drift``: how far spheres moved earlier in this time step."""
         involved = involved_spheres(self.cluster, self.n_clusters, made)
         if self.formulation == "almost_rigid":
-            k = self.tiles or tiles_per_side(int(involved.sum()), self.d, self.L, self.min_tile)
+            law = tiles_per_side if latest.shape[0] == made.shape[0] else later_round_tiles_per_side
+            k = self.tiles or law(int(involved.sum()), self.d, self.L, self.min_tile)
         else:
             k = 1
         seeds = np.flatnonzero(np.isin(self.global_id, latest.reshape(-1)))

@@ -10,6 +10,13 @@ be linked to in its own or an adjacent tile.
 The number of tiles grows with the number ``#S`` of interacting spheres as the paper
 states: one tile below 10^3 spheres, about 100^2 at 10^6.  We interpolate with the power
 law ``Mr = (#S / 10^3)^(4/3)`` through those two points, ``k = round(Mr^(1/d))``.
+
+Later rounds of step 2e (ours, see :mod:`parsim.core.ts.stepper`) move only the tiles around
+the few links the previous round made; everywhere else that round has converged.  They use
+tiles ``LATER_ROUND_TILE_WIDTHS`` interaction ranges wide, finer than the law above once
+``#S`` exceeds a few thousand: at N = 102 400, V_f = 0.3 the paper's tiles (about 37 R wide)
+put 40 000 spheres in a round made for a few hundred new links, and the later rounds took
+14 s of a 74 s run; with tiles 8 R wide they took 4.4 s (docs/benchmarks.md).
 """
 
 import math
@@ -25,6 +32,10 @@ ONE_TILE_BELOW = 1000
 TILE_GROWTH = 4.0 / 3.0
 
 
+#: Width of the tiles of later rounds of step 2e, in interaction ranges (the least tile width).
+LATER_ROUND_TILE_WIDTHS = 2.0
+
+
 def tiles_per_side(n_interacting, dimension, box_length, min_side):
     """``k``, the tiles per side for ``n_interacting`` spheres; tiles stay ``>= min_side`` wide."""
     if n_interacting < ONE_TILE_BELOW:
@@ -32,6 +43,13 @@ def tiles_per_side(n_interacting, dimension, box_length, min_side):
     total = (n_interacting / ONE_TILE_BELOW) ** TILE_GROWTH
     k = max(1, int(round(total ** (1.0 / dimension))))
     return max(1, min(k, int(math.floor(box_length / min_side))))
+
+
+def later_round_tiles_per_side(n_interacting, dimension, box_length, min_side):
+    """``k`` for a later round of step 2e: tiles ``LATER_ROUND_TILE_WIDTHS * min_side`` wide, or
+    those of :func:`tiles_per_side` where these are finer."""
+    fine = int(math.floor(box_length / (LATER_ROUND_TILE_WIDTHS * min_side)))
+    return max(fine, tiles_per_side(n_interacting, dimension, box_length, min_side))
 
 
 @jit
