@@ -6,7 +6,7 @@ A pair is *in contact* when ``phi_ij >= 0`` (eq. 3.2), that is ``|X_i - X_j| <= 
 
 import numpy as np
 
-from parsim.core.celllist import block_cells, build_cells, grid_size, neighbour_offsets
+from parsim.core.celllist import block_cells, cell_index, grid_size, neighbour_offsets
 from parsim.core.jit import jit
 from parsim.core.ts.links import are_linked
 
@@ -30,35 +30,71 @@ def _distance_sq(X, i, j):
 
 
 @jit
+def _sorted_by_cell(X, side, k):
+    """Rows of ``X`` sorted cell by cell (counting sort): ``(order, first, cell_of)``, the
+    rows of cell ``c`` being ``order[first[c]:first[c + 1]]``."""
+    n = X.shape[0]
+    first = np.zeros(k ** X.shape[1] + 1, dtype=np.int64)
+    cell_of = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        cell_of[i] = cell_index(X[i], side, k)
+        first[cell_of[i] + 1] += 1
+    for c in range(first.shape[0] - 1):
+        first[c + 1] += first[c]
+    fill = first[:-1].copy()
+    order = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        order[fill[cell_of[i]]] = i
+        fill[cell_of[i]] += 1
+    return order, first, cell_of
+
+
+@jit
 def _near_pairs(X, R, queries, group, reach, side, k):
     """Pairs ``(i, j)``, ``i`` in ``queries``, with a gap ``|X_i - X_j| - R_i - R_j <= reach``
     and ``group[i] != group[j]``; a pair of two queries is reported once, with ``i < j``.
 
     The grid (``k`` cells per side of length ``side >= 2 max R + reach``) covers the points.
+    The rows are copied cell by cell, and the queries taken in that order, so that the
+    spheres a query examines lie next to each other in memory: in row order, which the
+    motion of the clusters scrambles, a search over 102 400 spheres took 21 ms.
     """
     n, d = X.shape
-    head, nxt, _, cell_of, _ = build_cells(X, side, k)
-    offsets = neighbour_offsets(d)
-    coords = np.empty(d, dtype=np.int64)
-    block = np.empty(offsets.shape[0], dtype=np.int64)
+    order, first, cell_of = _sorted_by_cell(X, side, k)
     is_query = np.zeros(n, dtype=np.bool_)
     for i in queries:
         is_query[i] = True
+    Xs = np.empty((n, d))
+    radius = np.empty(n)
+    group_of = np.empty(n, dtype=group.dtype)
+    queried = np.empty(n, dtype=np.bool_)
+    for s in range(n):
+        i = order[s]
+        Xs[s] = X[i]
+        radius[s] = R[i]
+        group_of[s] = group[i]
+        queried[s] = is_query[i]
+    offsets = neighbour_offsets(d)
+    coords = np.empty(d, dtype=np.int64)
+    block = np.empty(offsets.shape[0], dtype=np.int64)
     pairs = np.empty((16, 2), dtype=np.int64)
     count = 0
-    for i in queries:
+    for s in range(n):
+        if not queried[s]:
+            continue
+        i = order[s]
         nb = block_cells(cell_of[i], k, offsets, coords, block)
         for b in range(nb):
-            j = head[block[b]]
-            while j >= 0:
-                if j != i and not (is_query[j] and j < i) and group[j] != group[i]:
-                    limit = R[i] + R[j] + reach
-                    if _distance_sq(X, i, j) <= limit * limit:
-                        pairs = _grow(pairs, count)
-                        pairs[count, 0] = i
-                        pairs[count, 1] = j
-                        count += 1
-                j = nxt[j]
+            for t in range(first[block[b]], first[block[b] + 1]):
+                j = order[t]
+                if t == s or (queried[t] and j < i) or group_of[t] == group_of[s]:
+                    continue
+                limit = radius[s] + radius[t] + reach
+                if _distance_sq(Xs, s, t) <= limit * limit:
+                    pairs = _grow(pairs, count)
+                    pairs[count, 0] = i
+                    pairs[count, 1] = j
+                    count += 1
     return pairs[:count].copy()
 
 
