@@ -242,6 +242,31 @@ def test_later_rounds_use_tiles_of_two_interaction_ranges_or_finer(n_interacting
     assert box / (later + 1) < tiles.LATER_ROUND_TILE_WIDTHS * least  # as fine as that allows
 
 
+def test_a_later_round_that_fails_in_fine_tiles_is_solved_in_the_first_rounds(monkeypatch):
+    """Every later round is made to fail in its fine tiles: the run still ends in one cluster
+    without overlap, each failure followed by the same round in the first round's tiles."""
+    tried = []  # (tiles per side, whether they are the fine ones of a later round)
+    real_solve, real_minimise = stepper._Run._solve, stepper.minimise
+
+    def solve(run, involved, latest, k, drift):
+        tried.append((k, k != tiles.tiles_per_side(int(involved.sum()), run.d, run.L, run.min_tile)))
+        return real_solve(run, involved, latest, k, drift)
+
+    def minimise(problem, params, *args, **kwargs):
+        outcome = real_minimise(problem, params, *args, **kwargs)
+        return replace(outcome, converged=False) if tried[-1][1] else outcome
+
+    monkeypatch.setattr(stepper._Run, "_solve", solve)
+    monkeypatch.setattr(stepper, "minimise", minimise)
+    x, v, radii, masses, length = paper_system(150, 0.3, seed=4)
+    result = simulate_ts(x, v, radii, masses, length)
+    assert result.stop_reason == "single_cluster"
+    assert all_gaps(result.positions, radii).min() >= DEEPEST_GAP
+    fine = [n for n, (_, is_fine) in enumerate(tried) if is_fine]
+    assert fine, "no later round ran"
+    assert all(not tried[n + 1][1] and tried[n + 1][0] < tried[n][0] for n in fine)
+
+
 def test_time_step_grows_to_twice_the_initial_one():
     x, v, radii, masses, length = paper_system(64, 0.3, seed=2)
     result = simulate_ts(x, v, radii, masses, length, time_step_factor=0.01)
