@@ -296,7 +296,8 @@ class _Run:
     def _solve(self, involved, latest, k, drift):
         """DAHA on the ``involved`` spheres in the tiles (``k`` per side) holding an end of a
         ``latest`` link, the surrounding tiles' as anchors: ``(moving, problem, outcome)``.
-        A sphere leaving the halo doubles the margin and starts again."""
+        A sphere leaving the halo doubles the margin and starts again.  A failed attempt in
+        fine tiles counts as a minimisation of its own."""
         seeds = np.flatnonzero(np.isin(self.global_id, latest.reshape(-1)))
         active = np.unique(self.domain.gather(tiles_of(self.X, seeds, self.L, k)))
         moving, anchors = select_spheres(self.X, involved[self.global_id], active, self.L, k)
@@ -306,14 +307,15 @@ class _Run:
             carried = self._carried_multipliers(problem) if self.daha.carry_multipliers else None
             outcome = minimise(problem, self.daha, self.attraction_range, exchange, multipliers=carried)
             self.work += problem.n_moving * outcome.iterations
-            self.n_minimisations += 1
-            self.n_iterations += outcome.iterations
-            self.max_iterations = max(self.max_iterations, outcome.iterations)
             if not outcome.left_halo:
-                return moving, problem, outcome
+                break
             self.margin *= 2.0  # every rank saw the same largest displacement
             if self.margin > self.max_displacement:
-                return moving, problem, outcome
+                break
+        self.n_minimisations += 1  # counted once: a run with a wider halo from the start is the same
+        self.n_iterations += outcome.iterations
+        self.max_iterations = max(self.max_iterations, outcome.iterations)
+        return moving, problem, outcome
 
     def _memory_order(self, rows):
         """An order of the owned ``rows`` cell by cell on the contact grid (ties by global id), so
