@@ -14,8 +14,8 @@ law ``Mr = (#S / 10^3)^(4/3)`` through those two points, ``k = round(Mr^(1/d))``
 Later rounds of step 2e (ours, see :mod:`parsim.core.ts.stepper`) move only the tiles around
 the few links the previous round made; everywhere else that round has converged.  They use
 tiles ``LATER_ROUND_TILE_WIDTHS`` interaction ranges wide, finer than the law above once
-``#S`` exceeds a few thousand: at N = 102 400, V_f = 0.3 the paper's tiles (about 37 R wide)
-put 40 000 spheres in a round made for a few hundred new links, and the later rounds took
+``#S`` exceeds a few thousand: at N = 102 400, V_f = 0.3 the paper's tiles (about 50 R wide)
+put some 30 000 spheres in a round made for a few hundred new links, and the later rounds took
 14 s of a 74 s run; with tiles 8 R wide they took 4.4 s (docs/benchmarks.md).
 """
 
@@ -30,8 +30,6 @@ from parsim.core.jit import jit
 ONE_TILE_BELOW = 1000
 #: Exponent of Mr against #S: Mr = 1 at 10^3 and 10^4 = 100^2 at 10^6 spheres.
 TILE_GROWTH = 4.0 / 3.0
-
-
 #: Width of the tiles of later rounds of step 2e, in interaction ranges (the least tile width).
 LATER_ROUND_TILE_WIDTHS = 2.0
 
