@@ -135,6 +135,26 @@ def test_energy_decreases_while_the_constraints_hold():
     assert abs(np.linalg.norm(problem.positions[0] - problem.positions[1]) - 2 * R) < CONTACT_GAP
 
 
+def test_a_tile_that_meets_the_stopping_tests_stops_while_another_goes_on():
+    """A linked pair (tile 0) far from a clump of 30 discs (tile 1): the pair settles where it
+    settles when minimised alone, and stays put while the clump iterates; at the end both
+    tiles meet (3.27), (3.28) and eps_max."""
+    rng = np.random.default_rng(30)
+    clump = 20.0 + rng.uniform(0.0, 0.4 * math.sqrt(30), (30, 2))
+    x = np.concatenate([[[1.0, 1.0], [1.3, 1.05]], clump])
+    problem, radii = problem_of(x, np.concatenate([[(0, 1)], touching_links(clump, first=2)]))
+    pair_track = []
+    outcome = minimise(problem, PARAMS, tile_of=np.r_[0, 0, np.ones(30, dtype=np.int64)], n_tiles=2,
+                       on_iteration=lambda r, p: pair_track.append(p.positions[:2].copy()))
+    assert outcome.converged and outcome.max_overlap <= PARAMS.max_overlap_tolerance
+    assert outcome.mean_overlap <= PARAMS.overlap_tolerance
+    assert all_gaps(problem.positions, radii).min() >= DEEPEST_GAP
+    alone, _ = problem_of(x[:2], [(0, 1)])
+    assert minimise(alone, PARAMS).iterations < outcome.iterations - 4 * FULL_SWEEP_EVERY
+    assert np.array_equal(problem.positions[:2], alone.positions)
+    assert all(np.array_equal(track, alone.positions) for track in pair_track[-4 * FULL_SWEEP_EVERY:])
+
+
 def test_anchors_do_not_move():
     problem, _ = problem_of([[1.0, 1.0], [1.3, 1.0], [0.62, 1.0]], [(0, 1), (0, 2)], moving=[0, 1])
     anchor = problem.positions[2].copy()

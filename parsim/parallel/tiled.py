@@ -105,6 +105,12 @@ class _ProblemExchange:
     def max(self, value):
         return self.domain.max(value)
 
+    def sum_array(self, values):
+        return self.domain.sum_array(values)
+
+    def max_array(self, values):
+        return self.domain.max_array(values)
+
 
 class DecomposedDomain:
     """The spheres of one run shared out among the ranks of ``comm`` (collective; every rank
@@ -168,13 +174,19 @@ class DecomposedDomain:
     def min(self, value):
         return self._reduce(value, MPI.MIN)
 
-    def sum_array(self, values):
+    def _reduce_array(self, values, op):
         started = time.perf_counter()
         values = np.ascontiguousarray(values, dtype=np.float64)
-        total = np.empty_like(values)
-        self.comm.Allreduce(values, total, op=MPI.SUM)
+        reduced = np.empty_like(values)
+        self.comm.Allreduce(values, reduced, op=op)
         self.traffic.add("reduction", values.nbytes * self.peers, started)
-        return total
+        return reduced
+
+    def sum_array(self, values):
+        return self._reduce_array(values, MPI.SUM)
+
+    def max_array(self, values):
+        return self._reduce_array(values, MPI.MAX)
 
     def gather(self, rows):
         started = time.perf_counter()

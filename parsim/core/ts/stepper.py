@@ -302,10 +302,12 @@ class _Run:
         active = np.unique(self.domain.gather(tiles_of(self.X, seeds, self.L, k)))
         moving, anchors = select_spheres(self.X, involved[self.global_id], active, self.L, k)
         moving = moving[self._memory_order(moving)]
+        tile_of = np.searchsorted(active, tiles_of(self.X, moving, self.L, k))  # each tile stops on its own
         while True:
             problem, exchange = self._problem(moving, anchors, drift)
             carried = self._carried_multipliers(problem) if self.daha.carry_multipliers else None
-            outcome = minimise(problem, self.daha, self.attraction_range, exchange, multipliers=carried)
+            outcome = minimise(problem, self.daha, self.attraction_range, exchange, multipliers=carried,
+                               tile_of=tile_of, n_tiles=active.size)
             self.work += problem.n_moving * outcome.iterations
             if not outcome.left_halo:
                 break
