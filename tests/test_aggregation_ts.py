@@ -135,24 +135,25 @@ def test_energy_decreases_while_the_constraints_hold():
     assert abs(np.linalg.norm(problem.positions[0] - problem.positions[1]) - 2 * R) < CONTACT_GAP
 
 
-def test_a_tile_that_meets_the_stopping_tests_stops_while_another_goes_on():
-    """A linked pair (tile 0) far from a clump of 30 discs (tile 1): the pair settles where it
-    settles when minimised alone, and stays put while the clump iterates; at the end both
-    tiles meet (3.27), (3.28) and eps_max."""
-    rng = np.random.default_rng(30)
-    clump = 20.0 + rng.uniform(0.0, 0.4 * math.sqrt(30), (30, 2))
-    x = np.concatenate([[[1.0, 1.0], [1.3, 1.05]], clump])
-    problem, radii = problem_of(x, np.concatenate([[(0, 1)], touching_links(clump, first=2)]))
-    pair_track = []
-    outcome = minimise(problem, PARAMS, tile_of=np.r_[0, 0, np.ones(30, dtype=np.int64)], n_tiles=2,
-                       on_iteration=lambda r, p: pair_track.append(p.positions[:2].copy()))
-    assert outcome.converged and outcome.max_overlap <= PARAMS.max_overlap_tolerance
-    assert outcome.mean_overlap <= PARAMS.overlap_tolerance
+def test_tiles_that_meet_the_stopping_tests_stop_while_others_go_on():
+    """A clump of 400 overlapping discs cut into 2 x 2 tiles: some tiles settle and stop while
+    others still move, the whole meets (3.27), (3.28) and eps_max, in fewer iterations than
+    judged as one tile."""
+    rng = np.random.default_rng(1)
+    side = 0.4 * math.sqrt(400)
+    x = 5.0 + rng.uniform(0.0, side, (400, 2))
+    tile_of = 2 * (x[:, 0] > 5.0 + side / 2) + (x[:, 1] > 5.0 + side / 2)
+    problem, radii = problem_of(x, touching_links(x))
+    track = []
+    outcome = minimise(problem, PARAMS, tile_of=tile_of, n_tiles=4,
+                       on_iteration=lambda r, p: track.append(p.positions[:400].copy()))
+    assert outcome.converged and outcome.max_step <= PARAMS.steadiness_tolerance
+    assert outcome.mean_overlap <= PARAMS.overlap_tolerance and outcome.max_overlap <= PARAMS.max_overlap_tolerance
     assert all_gaps(problem.positions, radii).min() >= DEEPEST_GAP
-    alone, _ = problem_of(x[:2], [(0, 1)])
-    assert minimise(alone, PARAMS).iterations < outcome.iterations - 4 * FULL_SWEEP_EVERY
-    assert np.array_equal(problem.positions[:2], alone.positions)
-    assert all(np.array_equal(track, alone.positions) for track in pair_track[-4 * FULL_SWEEP_EVERY:])
+    still = np.all(track[-FULL_SWEEP_EVERY] == track[-1], axis=1)  # did not move in the last sweep
+    assert any(still[tile_of == t].all() for t in range(4)) and not still.all()
+    whole, _ = problem_of(x, touching_links(x))
+    assert outcome.iterations < minimise(whole, PARAMS).iterations
 
 
 def test_anchors_do_not_move():

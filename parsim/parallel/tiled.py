@@ -105,9 +105,6 @@ class _ProblemExchange:
     def max(self, value):
         return self.domain.max(value)
 
-    def sum_array(self, values):
-        return self.domain.sum_array(values)
-
     def max_array(self, values):
         return self.domain.max_array(values)
 

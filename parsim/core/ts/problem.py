@@ -51,7 +51,6 @@ class Problem:
     link_ptr: np.ndarray
     link_to: np.ndarray
     n_links: int  #: distinct links with a moving end, the #S of (3.28), counted once over processes
-    links_counted: np.ndarray  #: per moving sphere, the links of ``n_links`` counted at it
     reach: float
     first_ghost: int
     moving_ghost: np.ndarray  #: per member, True for a ghost row that moves on its owner
@@ -144,9 +143,8 @@ def _ghost_partners(pair_a, pair_b, cross_pairs, link_ptr, link_to, moving_ghost
 
 @jit
 def _local_links(members, n_moving, local_of, head, nxt, to, moving_ghost):
-    """CSR of the linked partners (local indices) of each moving sphere, and how many distinct
-    links are counted at each (#S is their sum over processes; a link to a moving ghost is
-    counted by the process holding its lower global id)."""
+    """CSR of the linked partners (local indices) of each moving sphere, and #S (a link to a
+    moving ghost is counted by the process holding its lower global id)."""
     ptr = np.zeros(n_moving + 1, dtype=np.int64)
     for i in range(n_moving):
         slot = head[members[i]]
@@ -157,7 +155,7 @@ def _local_links(members, n_moving, local_of, head, nxt, to, moving_ghost):
     for i in range(n_moving):
         ptr[i + 1] += ptr[i]
     partners = np.empty(ptr[n_moving], dtype=np.int64)
-    counted = np.zeros(n_moving, dtype=np.int64)
+    distinct = 0
     for i in range(n_moving):
         e = ptr[i]
         slot = head[members[i]]
@@ -168,9 +166,9 @@ def _local_links(members, n_moving, local_of, head, nxt, to, moving_ghost):
                 e += 1
                 # a moving-moving link is listed at both ends, a moving-anchor link once
                 if j > i and not (moving_ghost[j] and members[j] < members[i]):
-                    counted[i] += 1
+                    distinct += 1
             slot = nxt[slot]
-    return ptr, partners, counted
+    return ptr, partners, distinct
 
 
 def build_problem(X, R, moving, anchors, links, reach, local_of, global_id=None, ghosts=None):
@@ -195,13 +193,12 @@ def build_problem(X, R, moving, anchors, links, reach, local_of, global_id=None,
         moving_ghost[own.size:] = ghosts.moving
     local_of[members] = np.arange(members.size)
     try:
-        link_ptr, link_to, links_counted = _local_links(members, moving.size, local_of, links.head, links.next,
-                                                        links.to, moving_ghost)
+        link_ptr, link_to, n_links = _local_links(members, moving.size, local_of, links.head, links.next, links.to,
+                                                  moving_ghost)
     finally:
         local_of[members] = -1
     problem = Problem(members=members, n_moving=int(moving.size), positions=np.concatenate(rows),
-                      radii=np.concatenate(radii), link_ptr=link_ptr, link_to=link_to, n_links=int(links_counted.sum()),
-                      links_counted=links_counted,
+                      radii=np.concatenate(radii), link_ptr=link_ptr, link_to=link_to, n_links=int(n_links),
                       reach=float(reach), first_ghost=int(own.size), moving_ghost=moving_ghost)
     problem.refresh_pairs()
     return problem
