@@ -265,13 +265,15 @@ def test_later_rounds_use_tiles_of_two_interaction_ranges_or_finer(n_interacting
 
 def test_a_later_round_that_fails_in_fine_tiles_is_solved_in_the_first_rounds(monkeypatch):
     """Every later round is made to fail in its fine tiles: the run still ends in one cluster
-    without overlap, each failure followed by the same round in the first round's tiles."""
-    tried = []  # (tiles per side, whether they are the fine ones of a later round)
+    without overlap, each failure (given FINE_TILE_ITERATIONS) followed by the same round in
+    the first round's tiles (given max_iterations)."""
+    tried = []  # (tiles per side, whether they are the fine ones of a later round, iteration cap)
     real_solve, real_minimise = stepper._Run._solve, stepper.minimise
 
-    def solve(run, involved, latest, k, drift):
-        tried.append((k, k != tiles.tiles_per_side(int(involved.sum()), run.d, run.L, run.min_tile)))
-        return real_solve(run, involved, latest, k, drift)
+    def solve(run, involved, latest, k, drift, daha):
+        is_fine = k != tiles.tiles_per_side(int(involved.sum()), run.d, run.L, run.min_tile)
+        tried.append((k, is_fine, daha.max_iterations))
+        return real_solve(run, involved, latest, k, drift, daha)
 
     def minimise(problem, params, *args, **kwargs):
         outcome = real_minimise(problem, params, *args, **kwargs)
@@ -283,9 +285,11 @@ def test_a_later_round_that_fails_in_fine_tiles_is_solved_in_the_first_rounds(mo
     result = simulate_ts(x, v, radii, masses, length)
     assert result.stop_reason == "single_cluster"
     assert all_gaps(result.positions, radii).min() >= DEEPEST_GAP
-    fine = [n for n, (_, is_fine) in enumerate(tried) if is_fine]
+    fine = [n for n, (_, is_fine, _) in enumerate(tried) if is_fine]
     assert fine, "no later round ran"
     assert all(not tried[n + 1][1] and tried[n + 1][0] < tried[n][0] for n in fine)
+    assert {tried[n][2] for n in fine} == {stepper.FINE_TILE_ITERATIONS}
+    assert {cap for _, is_fine, cap in tried if not is_fine} == {PARAMS.max_iterations}
 
 
 def test_time_step_grows_to_twice_the_initial_one():

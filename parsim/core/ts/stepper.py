@@ -47,7 +47,7 @@ links come out on any number of processes.
 """
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -75,6 +75,9 @@ HALO_MARGIN = 2.0
 #: A minimisation that moves a sphere farther than this (in largest radii) has gone unstable
 #: and is reported (DAHA resolves overlaps of at most 2 R; a few radii of chain pushing is normal).
 MAX_DISPLACEMENT = 10.0
+#: A later round of step 2e tried in fine tiles gives up after this many DAHA iterations and is
+#: solved in the first round's tiles (such rounds converge in at most a few thousand).
+FINE_TILE_ITERATIONS = 10_000
 #: Rounds of steps 2c-2d in one time step before it is reported as not settling.
 MAX_LINK_ROUNDS = 1000
 #: The quiet-step search examines pairs up to the gap the fastest pair closes in this many steps
@@ -251,8 +254,10 @@ class _Run:
         step, in the tiles holding an end of the ``latest`` of them; returns the owned rows that
         moved.  ``drift``: how far spheres moved earlier in this time step."""
         involved = involved_spheres(self.cluster, self.n_clusters, made)
-        for k in self._tilings(involved, first_round=latest.shape[0] == made.shape[0]):
-            moving, problem, outcome = self._solve(involved, latest, k, drift)
+        tilings = self._tilings(involved, first_round=latest.shape[0] == made.shape[0])
+        for k in tilings:
+            cap = self.daha.max_iterations if k == tilings[-1] else min(self.daha.max_iterations, FINE_TILE_ITERATIONS)
+            moving, problem, outcome = self._solve(involved, latest, k, drift, replace(self.daha, max_iterations=cap))
             if outcome.converged or not outcome.finite or outcome.left_halo:
                 break
         if self.daha.carry_multipliers:
@@ -281,9 +286,10 @@ class _Run:
 
     def _tilings(self, involved, first_round):
         """Tiles per side to minimise in, in the order tried: a later round of step 2e tries
-        finer tiles (:mod:`parsim.core.ts.tiles`) and, should its spheres not find a
-        configuration that meets the stopping tests between the anchors so near, the first
-        round's (at N = 102 400, V_f = 0.1 one of 16 spheres among 71 links did not)."""
+        finer tiles (:mod:`parsim.core.ts.tiles`) for at most ``FINE_TILE_ITERATIONS`` and,
+        should its spheres not find a configuration that meets the stopping tests between the
+        anchors so near, the first round's (at N = 102 400, V_f = 0.1 one of 16 spheres among
+        71 links did not)."""
         if self.formulation != "almost_rigid":
             return [1]
         if self.tiles:
@@ -293,9 +299,10 @@ class _Run:
         fine = later_round_tiles_per_side(n_interacting, self.d, self.L, self.min_tile)
         return [law] if first_round or fine == law else [fine, law]
 
-    def _solve(self, involved, latest, k, drift):
-        """DAHA on the ``involved`` spheres in the tiles (``k`` per side) holding an end of a
-        ``latest`` link, the surrounding tiles' as anchors: ``(moving, problem, outcome)``.
+    def _solve(self, involved, latest, k, drift, daha):
+        """DAHA (parameters ``daha``) on the ``involved`` spheres in the tiles (``k`` per side)
+        holding an end of a ``latest`` link, the surrounding tiles' as anchors:
+        ``(moving, problem, outcome)``.
         A sphere leaving the halo doubles the margin and starts again.  A failed attempt in
         fine tiles counts as a minimisation of its own."""
         seeds = np.flatnonzero(np.isin(self.global_id, latest.reshape(-1)))
@@ -306,7 +313,7 @@ class _Run:
         while True:
             problem, exchange = self._problem(moving, anchors, drift)
             carried = self._carried_multipliers(problem) if self.daha.carry_multipliers else None
-            outcome = minimise(problem, self.daha, self.attraction_range, exchange, multipliers=carried,
+            outcome = minimise(problem, daha, self.attraction_range, exchange, multipliers=carried,
                                tile_of=tile_of, n_tiles=active.size)
             self.work += problem.n_moving * outcome.iterations
             if not outcome.left_halo:
