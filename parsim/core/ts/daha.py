@@ -559,13 +559,18 @@ def attraction_energy(problem):
     return energy
 
 
+@jit
 def _drop_settled(awake, settled, is_awake):
     """The ``awake`` spheres outside settled tiles (the others are marked asleep)."""
-    in_settled = settled[awake]
-    if not in_settled.any():
-        return awake
-    is_awake[awake[in_settled]] = False
-    return awake[~in_settled]
+    kept = np.empty_like(awake)
+    count = 0
+    for i in awake:
+        if settled[i]:
+            is_awake[i] = False
+        else:
+            kept[count] = i
+            count += 1
+    return kept[:count]
 
 
 def minimise(problem, params, attraction_range=math.inf, exchange=None, on_iteration=None, multipliers=None,
@@ -624,6 +629,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     restless = np.zeros(P.shape[0], dtype=np.bool_)
     moved = np.zeros(P.shape[0], dtype=np.bool_)  # whose candidate pairs are searched again
     settled = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows in settled tiles, ghost rows as on their owner
+    any_settled = False
     sleep = params.sleep_tolerance
     polishing = False
     iteration = 0
@@ -642,7 +648,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
             _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
             built_at[moved[:n_moving]] = P[:n_moving][moved[:n_moving]]
         if full:
-            awake = _drop_settled(everyone, settled, is_awake)
+            awake = _drop_settled(everyone, settled, is_awake) if any_settled else everyone
         previous[:] = P[:n_moving]
         previous_ghost[:] = P[first_ghost:]
         _drift(P, U, awake, 0.5 * delta)
@@ -670,7 +676,8 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
                  problem.ghost_ptr, problem.ghost_partner)
         if not check:
             awake = _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, *graph, sleep)
-            awake = _drop_settled(awake, settled, is_awake)
+            if any_settled:
+                awake = _drop_settled(awake, settled, is_awake)
             exchange.share(is_awake)
             continue
         total, overlapping, deepest, largest = _measure(phi, problem.pair_counted, P, previous, problem.link_ptr,
@@ -688,6 +695,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
             done = np.zeros(n_tiles, dtype=np.bool_)
         if done.all():
             return Outcome(True, iteration, mean_overlap, deepest, largest, True, lam)
+        any_settled = bool(done.any())
         settled[:n_moving] = done[tile_of]
         exchange.share(settled)
         U[settled[:n_moving]] = 0.0
@@ -697,6 +705,8 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
             _restless(P, previous, phi, problem.pair_ptr, problem.pair_of, sleep, params.overlap_tolerance**2,
                       restless)
             exchange.share(restless)
-            awake = _drop_settled(_settle(restless, U, is_awake, first_ghost, *graph), settled, is_awake)
+            awake = _settle(restless, U, is_awake, first_ghost, *graph)
+            if any_settled:
+                awake = _drop_settled(awake, settled, is_awake)
             exchange.share(is_awake)
     return Outcome(False, iteration, mean_overlap, deepest, largest, True, lam)
