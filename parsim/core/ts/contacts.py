@@ -57,7 +57,8 @@ def _near_pairs(X, R, queries, group, reach, side, k):
     The grid (``k`` cells per side of length ``side >= 2 max R + reach``) covers the points.
     The rows are copied cell by cell, and the queries taken in that order, so that the
     spheres a query examines lie next to each other in memory: in row order, which the
-    motion of the clusters scrambles, a search over 102 400 spheres took 21 ms.
+    motion of the clusters scrambles, a search over 102 400 scattered spheres took 45 ms
+    instead of 22 ms.
     """
     n, d = X.shape
     order, first, cell_of = _sorted_by_cell(X, side, k)
