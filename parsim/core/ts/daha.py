@@ -433,19 +433,16 @@ def _settle(restless, U, is_awake, first_ghost, link_ptr, link_to, pair_ptr, pai
 
 
 @jit
-def _measure(phi, counted, P, previous, link_ptr, pair_ptr, pair_of, sphere_overlap):
-    """Overlap sum over the ``counted`` pairs (3.28), deepest overlap, mean overlap per moving
-    sphere, largest step (3.27)."""
+def _measure(phi, counted, link_ptr, pair_ptr, pair_of, sphere_overlap):
+    """Overlap sum and count over the ``counted`` pairs (3.28), and the mean overlap per
+    moving sphere (``sphere_overlap``, filled in)."""
     total = 0.0
     overlapping = 0
-    deepest = 0.0
     for p in range(phi.shape[0]):
-        if phi[p] > 0.0:
-            if counted[p]:
-                total += math.sqrt(phi[p])
-                overlapping += 1
-            deepest = max(deepest, phi[p])
-    for i in range(previous.shape[0]):
+        if phi[p] > 0.0 and counted[p]:
+            total += math.sqrt(phi[p])
+            overlapping += 1
+    for i in range(sphere_overlap.shape[0]):
         s = 0.0
         for e in range(pair_ptr[i], pair_ptr[i + 1]):
             p = pair_of[e]
@@ -453,7 +450,7 @@ def _measure(phi, counted, P, previous, link_ptr, pair_ptr, pair_of, sphere_over
                 s += math.sqrt(phi[p])
         degree = link_ptr[i + 1] - link_ptr[i]
         sphere_overlap[i] = s / max(degree, 1)
-    return total, overlapping, math.sqrt(deepest), _largest_step(P, previous)
+    return total, overlapping
 
 
 @jit
@@ -527,13 +524,11 @@ def _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
     return largest, deepest
 
 
-def _settled_tiles(P, previous, phi, problem, tile_of, n_tiles, params, exchange):
-    """The tiles whose spheres meet (3.27) and the deepest-overlap bound (module docstring,
-    "Stopping tile by tile"), the same on every process."""
+def _tile_maxima(P, previous, phi, problem, tile_of, n_tiles, exchange):
+    """Per tile, over all processes: the largest step (3.27) and the deepest overlap."""
     largest, deepest = _tile_measures(P, previous, phi, problem.pair_a, problem.pair_b, problem.n_moving, tile_of,
                                       n_tiles)
-    largest, deepest = exchange.max_array(largest), exchange.max_array(deepest)
-    return (largest <= params.steadiness_tolerance) & (deepest <= params.max_overlap_tolerance)
+    return exchange.max_array(largest), exchange.max_array(deepest)
 
 
 @jit
@@ -609,8 +604,8 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     previous_ghost = P[first_ghost:].copy()
     phi = np.empty(problem.pair_a.size)
     _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
-    total, overlapping, _, _ = _measure(phi, problem.pair_counted, P, previous, problem.link_ptr, problem.pair_ptr,
-                                        problem.pair_of, sphere_overlap)
+    total, overlapping = _measure(phi, problem.pair_counted, problem.link_ptr, problem.pair_ptr, problem.pair_of,
+                                  sphere_overlap)
     n_links = exchange.sum(float(problem.n_links))
     n_spheres = exchange.sum(float(n_moving))
     total = exchange.sum(total)
@@ -680,19 +675,18 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
                 awake = _drop_settled(awake, settled, is_awake)
             exchange.share(is_awake)
             continue
-        total, overlapping, deepest, largest = _measure(phi, problem.pair_counted, P, previous, problem.link_ptr,
-                                                        problem.pair_ptr, problem.pair_of, sphere_overlap)
+        total, overlapping = _measure(phi, problem.pair_counted, problem.link_ptr, problem.pair_ptr, problem.pair_of,
+                                      sphere_overlap)
         total = exchange.sum(total)
         mean_overlap = total / max(n_links, 1.0)
         typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
-        largest = exchange.max(largest)
-        deepest = exchange.max(deepest)
+        tile_largest, tile_deepest = _tile_maxima(P, previous, phi, problem, tile_of, n_tiles, exchange)
+        largest, deepest = float(tile_largest.max()), float(tile_deepest.max())
         if not (math.isfinite(largest) and math.isfinite(mean_overlap)):
             return Outcome(False, iteration, mean_overlap, deepest, largest, False, lam)
-        if mean_overlap <= params.overlap_tolerance:
-            done = _settled_tiles(P, previous, phi, problem, tile_of, n_tiles, params, exchange)
-        else:
-            done = np.zeros(n_tiles, dtype=np.bool_)
+        # module docstring, "Stopping tile by tile"
+        done = ((tile_largest <= params.steadiness_tolerance) & (tile_deepest <= params.max_overlap_tolerance)
+                & (mean_overlap <= params.overlap_tolerance))
         if done.all():
             return Outcome(True, iteration, mean_overlap, deepest, largest, True, lam)
         any_settled = bool(done.any())
