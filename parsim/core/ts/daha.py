@@ -454,11 +454,19 @@ def _measure(phi, counted, link_ptr, pair_ptr, pair_of, sphere_overlap):
 
 
 @jit
-def _largest_step(P, previous):
+def _largest_step(P, previous, rows):
+    """``max |P_i - previous_i|`` over the moving spheres ``rows``."""
     largest = 0.0
-    for i in range(previous.shape[0]):
+    for i in rows:
         largest = max(largest, _distance_sq(P, i, previous, i))
     return math.sqrt(largest)
+
+
+@jit
+def _copy_rows(target, source, rows):
+    for i in rows:
+        for k in range(target.shape[1]):
+            target[i, k] = source[i, k]
 
 
 @jit
@@ -628,12 +636,19 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     sleep = params.sleep_tolerance
     polishing = False
     iteration = 0
+    # Only the spheres stepped in an iteration move, so the bookkeeping between iterations
+    # goes over those alone: ``previous`` equals ``P`` on every other moving row, and
+    # ``drift`` bounds from above how far any moving sphere is from ``built_at``.
+    stepped = everyone[:0]
+    drift = 0.0
     while iteration < params.max_iterations:
         guarded = max(typical_overlap, floor)
         check = sleep == 0.0 or iteration % FULL_SWEEP_EVERY == 0
         full = check and not polishing
-        if exchange.max(_largest_step(P, built_at)) > REFRESH_DRIFT * problem.reach:  # a pair may come within reach
-            if exchange.max(_largest_step(P, start)) + REFRESH_DRIFT * problem.reach > exchange.margin:
+        _copy_rows(previous, P, stepped)
+        drift = max(drift, _largest_step(P, built_at, stepped))
+        if exchange.max(drift) > REFRESH_DRIFT * problem.reach:  # a pair may come within reach
+            if exchange.max(_largest_step(P, start, everyone)) + REFRESH_DRIFT * problem.reach > exchange.margin:
                 return Outcome(False, iteration, mean_overlap, deepest, largest, True, lam, left_halo=True)
             far = REFRESH_SET * REFRESH_DRIFT * problem.reach
             moved[:n_moving] = np.sum((P[:n_moving] - built_at) ** 2, axis=1) > far * far
@@ -642,9 +657,10 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
             phi = np.empty(problem.pair_a.size)
             _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
             built_at[moved[:n_moving]] = P[:n_moving][moved[:n_moving]]
+            drift = _largest_step(P, built_at, everyone)
         if full:
             awake = _drop_settled(everyone, settled, is_awake) if any_settled else everyone
-        previous[:] = P[:n_moving]
+        stepped = awake
         previous_ghost[:] = P[first_ghost:]
         _drift(P, U, awake, 0.5 * delta)
         exchange.share(P)
