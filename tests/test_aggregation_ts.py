@@ -156,6 +156,25 @@ def test_tiles_that_meet_the_stopping_tests_stop_while_others_go_on():
     assert outcome.iterations < minimise(whole, PARAMS).iterations
 
 
+@pytest.mark.parametrize("jammed_checks, converges", [(daha.JAMMED_CHECKS, True), (10**9, False)])
+def test_a_jammed_tile_holds_open_the_tiles_pressing_on_it(monkeypatch, jammed_checks, converges):
+    """A disc between an anchor (overlap 0.11 > eps_max) and three discs of another tile
+    (overlaps 0.095) that settle at the first check: a jam, until that tile is held open.
+    The mean test (3.28) is set aside (eps_c = 1), as the settled links of a large
+    minimisation dilute it; spheres do not sleep, so every iteration is a check."""
+    monkeypatch.setattr(daha, "JAMMED_CHECKS", jammed_checks)
+    x = [[1.0, 1.0]] + [[1.0 + 0.3885 * math.cos(a), 1.0 + 0.3885 * math.sin(a)] for a in (0.0, math.pi / 3,
+                                                                                           -math.pi / 3)]
+    problem, radii = problem_of(x + [[1.0 - 0.3847, 1.0]], [], moving=[0, 1, 2, 3])
+    params = replace(PARAMS, overlap_tolerance=1.0, sleep_tolerance=0.0, max_iterations=2000)
+    outcome = minimise(problem, params, tile_of=np.array([0, 1, 1, 1]), n_tiles=2)
+    assert outcome.converged == converges
+    if converges:
+        assert all_gaps(problem.positions, radii).min() >= DEEPEST_GAP
+    else:
+        assert outcome.max_overlap > PARAMS.max_overlap_tolerance and outcome.max_step < 1e-9
+
+
 def test_anchors_do_not_move():
     problem, _ = problem_of([[1.0, 1.0], [1.3, 1.0], [0.62, 1.0]], [(0, 1), (0, 2)], moving=[0, 1])
     anchor = problem.positions[2].copy()

@@ -88,6 +88,17 @@ in 6.8 s instead of 1905 in 15.7 s.  The mean overlap left is then close to ``ep
 a small tile jammed against its anchors can hold a mean above ``eps_c`` for ever (a later
 round of 199 spheres in 34 tiles at N = 6400 ran 100 000 iterations).
 
+Jammed tiles.  Settled neighbours can also jam a tile: a sphere pressed by settled spheres
+(each pair at most ``eps_max``) into an anchor (deeper than ``eps_max``) has nowhere to go,
+and its tile stays steady and too deep for ever.  At N = 10^6 (step 6, 667 160 spheres) one
+such sphere, at 0.103 against an anchor with three settled partners at 0.08, held a
+minimisation for 4600 of its 5393 iterations; a later round in fine tiles failed after
+10 000.  A tile found steady but too deep at ``JAMMED_CHECKS`` checks in a row is *jammed*,
+and a tile with a moving sphere that overlaps a moving sphere of a jammed tile does not
+settle, so the spheres pressing on the jam can give way.  Those two minimisations replayed
+stop after 689 and 609 iterations; the two above are unchanged (849 and 657), as a tile
+that is still moving, or has been deep only for a moment, holds nothing open.
+
 Initial multipliers.  Eq. 3.26 sets ``lambda_ij = lambda max(0, phi_ij)``.  A link that
 took part in the previous minimisation ended it at a critical point of (3.8) with its
 multiplier; restarting it from ``max(0, phi_ij) ~ 0`` releases every settled contact of
@@ -163,6 +174,8 @@ REFRESH_SET = 0.5
 #: With sleeping spheres, every sphere is updated (and the stopping conditions tested) once
 #: in this many iterations.
 FULL_SWEEP_EVERY = 16
+#: A tile steady but deeper than eps_max at this many checks in a row is jammed (module docstring).
+JAMMED_CHECKS = 4
 
 
 @dataclass(frozen=True)
@@ -532,6 +545,21 @@ def _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
     return largest, deepest
 
 
+@jit
+def _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_deep_tile):
+    """Per tile, 1.0 if one of its moving spheres overlaps a moving sphere of a tile whose
+    deepest overlap is above ``eps_max`` (``in_deep_tile``, per row), else 0.0."""
+    pressed = np.zeros(n_tiles)
+    for p in range(phi.shape[0]):
+        if phi[p] > 0.0:
+            a, b = pair_a[p], pair_b[p]
+            if in_deep_tile[b]:
+                pressed[tile_of[a]] = 1.0
+            if in_deep_tile[a] and b < n_moving:
+                pressed[tile_of[b]] = 1.0
+    return pressed
+
+
 def _tile_maxima(P, previous, phi, problem, tile_of, n_tiles, exchange):
     """Per tile, over all processes: the largest step (3.27) and the deepest overlap."""
     largest, deepest = _tile_measures(P, previous, phi, problem.pair_a, problem.pair_b, problem.n_moving, tile_of,
@@ -633,6 +661,8 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     moved = np.zeros(P.shape[0], dtype=np.bool_)  # whose candidate pairs are searched again
     settled = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows in settled tiles, ghost rows as on their owner
     any_settled = False
+    jammed_checks = np.zeros(n_tiles, dtype=np.int64)
+    in_deep_tile = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghost rows as on their owner
     sleep = params.sleep_tolerance
     polishing = False
     iteration = 0
@@ -701,10 +731,18 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
         if not (math.isfinite(largest) and math.isfinite(mean_overlap)):
             return Outcome(False, iteration, mean_overlap, deepest, largest, False, lam)
         # module docstring, "Stopping tile by tile"
-        done = ((tile_largest <= params.steadiness_tolerance) & (tile_deepest <= params.max_overlap_tolerance)
-                & (mean_overlap <= params.overlap_tolerance))
+        steady = tile_largest <= params.steadiness_tolerance
+        too_deep = tile_deepest > params.max_overlap_tolerance
+        done = steady & ~too_deep & (mean_overlap <= params.overlap_tolerance)
         if done.all():
             return Outcome(True, iteration, mean_overlap, deepest, largest, True, lam)
+        jammed_checks = np.where(steady & too_deep, jammed_checks + 1, 0)
+        jammed = jammed_checks >= JAMMED_CHECKS
+        if jammed.any() and done.any():  # a jammed tile holds open the tiles pressing on it
+            in_deep_tile[:n_moving] = jammed[tile_of]
+            exchange.share(in_deep_tile)
+            pressed = _pressed_tiles(phi, problem.pair_a, problem.pair_b, n_moving, tile_of, n_tiles, in_deep_tile)
+            done &= exchange.max_array(pressed) == 0.0
         any_settled = bool(done.any())
         settled[:n_moving] = done[tile_of]
         exchange.share(settled)
