@@ -407,10 +407,14 @@ def _merged(a, b):
 
 
 @jit
-def _restless(P, previous, phi, pair_ptr, pair_of, tolerance, restless_phi, restless):
-    """After a full sweep: a moving sphere is restless if it moved more than ``tolerance`` or
-    overlaps a partner by more than ``sqrt(restless_phi)``."""
+def _restless(P, previous, phi, pair_ptr, pair_of, tolerance, restless_phi, settled, restless):
+    """After a full sweep: a moving sphere outside the ``settled`` tiles is restless if it moved
+    more than ``tolerance`` or overlaps a partner by more than ``sqrt(restless_phi)`` (a settled
+    sphere's deep partners are restless themselves, so they wake what it would wake)."""
     for i in range(previous.shape[0]):
+        if settled[i]:
+            restless[i] = False
+            continue
         moved = _distance_sq(P, i, previous, i) > tolerance * tolerance
         for e in range(pair_ptr[i], pair_ptr[i + 1]):
             moved = moved or phi[pair_of[e]] > restless_phi
@@ -751,7 +755,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
             polishing = ((polishing or largest <= params.steadiness_tolerance)
                          and mean_overlap <= params.overlap_tolerance)
             _restless(P, previous, phi, problem.pair_ptr, problem.pair_of, sleep, params.overlap_tolerance**2,
-                      restless)
+                      settled, restless)
             exchange.share(restless)
             awake = _settle(restless, U, is_awake, first_ghost, *graph)
             if any_settled:

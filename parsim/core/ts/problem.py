@@ -62,6 +62,8 @@ class Problem:
     cross_pairs: np.ndarray = None
     ghost_ptr: np.ndarray = None
     ghost_partner: np.ndarray = None
+    cross_link_from: np.ndarray = None  #: the moving end of each link to a moving ghost ...
+    cross_link_ghost: np.ndarray = None  #: ... and its ghost row
 
     def refresh_pairs(self, multipliers=None, moved=None):
         """Recompute the candidate pairs at the current positions, all of them or (``moved``, a
@@ -78,8 +80,13 @@ class Problem:
         crossing = self.moving_ghost[self.pair_b]  # pair_a < n_moving <= pair_b for these
         self.cross_pairs = np.flatnonzero(crossing)
         self.pair_counted = ~(crossing & (self.members[self.pair_b] < self.members[self.pair_a]))
+        if self.cross_link_from is None:  # links do not change during a minimisation
+            from_row = np.repeat(np.arange(self.n_moving), np.diff(self.link_ptr))
+            crossing_link = self.moving_ghost[self.link_to]
+            self.cross_link_from, self.cross_link_ghost = from_row[crossing_link], self.link_to[crossing_link]
         self.ghost_ptr, self.ghost_partner = _ghost_partners(self.pair_a, self.pair_b, self.cross_pairs,
-                                                             self.link_ptr, self.link_to, self.moving_ghost,
+                                                             self.cross_link_from, self.cross_link_ghost,
+                                                             self.moving_ghost.shape[0] - self.first_ghost,
                                                              self.first_ghost)
         if multipliers is None:
             return np.zeros(self.pair_a.size)
@@ -113,17 +120,15 @@ def _pair_links(members, pair_a, pair_b, head, nxt, to):
 
 
 @jit
-def _ghost_partners(pair_a, pair_b, cross_pairs, link_ptr, link_to, moving_ghost, first_ghost):
-    """CSR over the ghost rows of the local moving partners (cross pairs, then cross links)
-    of each moving ghost: who must wake when that ghost moves."""
-    n_ghost = moving_ghost.shape[0] - first_ghost
+def _ghost_partners(pair_a, pair_b, cross_pairs, link_from, link_ghost, n_ghost, first_ghost):
+    """CSR over the ghost rows of the local moving partners (cross pairs, then the cross links
+    ``link_from[e]`` -- ``link_ghost[e]``) of each moving ghost: who must wake when that ghost
+    moves."""
     ptr = np.zeros(n_ghost + 1, dtype=np.int64)
     for p in cross_pairs:
         ptr[pair_b[p] - first_ghost + 1] += 1
-    for i in range(link_ptr.shape[0] - 1):
-        for e in range(link_ptr[i], link_ptr[i + 1]):
-            if moving_ghost[link_to[e]]:
-                ptr[link_to[e] - first_ghost + 1] += 1
+    for e in range(link_ghost.shape[0]):
+        ptr[link_ghost[e] - first_ghost + 1] += 1
     for g in range(n_ghost):
         ptr[g + 1] += ptr[g]
     fill = ptr[:-1].copy()
@@ -132,12 +137,10 @@ def _ghost_partners(pair_a, pair_b, cross_pairs, link_ptr, link_to, moving_ghost
         g = pair_b[p] - first_ghost
         partner[fill[g]] = pair_a[p]
         fill[g] += 1
-    for i in range(link_ptr.shape[0] - 1):
-        for e in range(link_ptr[i], link_ptr[i + 1]):
-            if moving_ghost[link_to[e]]:
-                g = link_to[e] - first_ghost
-                partner[fill[g]] = i
-                fill[g] += 1
+    for e in range(link_ghost.shape[0]):
+        g = link_ghost[e] - first_ghost
+        partner[fill[g]] = link_from[e]
+        fill[g] += 1
     return ptr, partner
 
 
