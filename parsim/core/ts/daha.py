@@ -480,6 +480,23 @@ def _largest_step(P, previous, rows):
 
 
 @jit
+def _rebase(P, built_at, far, moved):
+    """Flag in ``moved`` the moving spheres more than ``far`` from ``built_at``, where their
+    pairs are to be searched again, and move their ``built_at`` to ``P``; returns how far the
+    others are from theirs at most."""
+    largest = 0.0
+    for i in range(built_at.shape[0]):
+        distance_sq = _distance_sq(P, i, built_at, i)
+        moved[i] = distance_sq > far * far
+        if moved[i]:
+            for k in range(built_at.shape[1]):
+                built_at[i, k] = P[i, k]
+        else:
+            largest = max(largest, distance_sq)
+    return math.sqrt(largest)
+
+
+@jit
 def _copy_rows(target, source, rows):
     for i in rows:
         for k in range(target.shape[1]):
@@ -684,14 +701,11 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
         if exchange.max(drift) > REFRESH_DRIFT * problem.reach:  # a pair may come within reach
             if exchange.max(_largest_step(P, start, everyone)) + REFRESH_DRIFT * problem.reach > exchange.margin:
                 return Outcome(False, iteration, mean_overlap, deepest, largest, True, lam, left_halo=True)
-            far = REFRESH_SET * REFRESH_DRIFT * problem.reach
-            moved[:n_moving] = np.sum((P[:n_moving] - built_at) ** 2, axis=1) > far * far
+            drift = _rebase(P, built_at, REFRESH_SET * REFRESH_DRIFT * problem.reach, moved)
             exchange.share(moved)
             lam = problem.refresh_pairs(lam, moved)
             phi = np.empty(problem.pair_a.size)
             _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
-            built_at[moved[:n_moving]] = P[:n_moving][moved[:n_moving]]
-            drift = _largest_step(P, built_at, everyone)
         if full:
             awake = _drop_settled(everyone, settled, is_awake) if any_settled else everyone
         stepped = awake
