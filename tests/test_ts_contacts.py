@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from parsim.core.ts.contacts import candidate_pairs, incidence, updated_candidate_pairs
+from parsim.core.ts.contacts import BinnedRows, candidate_pairs, incidence, updated_candidate_pairs
 from parsim.core.ts.daha import REFRESH_DRIFT, REFRESH_SET
 
 
@@ -30,12 +30,14 @@ def test_refreshing_the_moved_spheres_never_misses_a_contact(d):
     """Spheres wander (the anchors stay); whenever one is REFRESH_DRIFT x reach from where its
     pairs were searched, the pairs of those past REFRESH_SET of that are searched again, as
     DAHA does.  Every touching pair stays a candidate; the refreshed spheres' pairs are exactly
-    those within reach, the others' pairs are kept."""
+    those within reach, the others' pairs are kept, and each pair that was a candidate before
+    is traced to its index then.  Some spheres leave the box their cells were built on."""
     rng = np.random.default_rng(10 + d)
     n, n_moving, reach = 300, 250, 0.2
     X = rng.uniform(0.0, 4.0, (n, d))
     R = rng.uniform(0.15, 0.25, n)
     a, b = candidate_pairs(X, R, n_moving, reach)
+    binned = BinnedRows(X, R, reach)
     searched_at = X[:n_moving].copy()
     refreshes = 0
     for _ in range(400):
@@ -45,8 +47,13 @@ def test_refreshing_the_moved_spheres_never_misses_a_contact(d):
             moved = np.zeros(n, dtype=np.bool_)
             moved[:n_moving] = drift > REFRESH_SET * REFRESH_DRIFT * reach
             kept = {(i, j) for i, j in zip(a.tolist(), b.tolist()) if not (moved[i] or moved[j])}
-            a, b = updated_candidate_pairs(X, R, n_moving, reach, a, b, moved)
+            old_a, old_b = a, b
+            a, b, source = updated_candidate_pairs(X, R, n_moving, reach, a, b, moved, binned)
             pairs = set(zip(a.tolist(), b.tolist()))
+            known = source >= 0
+            assert np.array_equal(a[known], old_a[source[known]]) and np.array_equal(b[known], old_b[source[known]])
+            was = set(zip(old_a.tolist(), old_b.tolist()))
+            assert set(zip(a[known].tolist(), b[known].tolist())) == pairs & was
             fresh = {(i, j) for i, j in brute_force_pairs(X, R, n_moving, reach) if moved[i] or moved[j]}
             assert pairs == kept | fresh
             assert np.all(np.diff(a * n + b) > 0)
@@ -54,6 +61,7 @@ def test_refreshing_the_moved_spheres_never_misses_a_contact(d):
             refreshes += 1
         assert brute_force_pairs(X, R, n_moving, 0.0) <= set(zip(a.tolist(), b.tolist()))
     assert refreshes > 5, "the spheres did not wander far enough to test the refresh"
+    assert ((X < 0.0) | (X > 4.0)).any(), "no sphere left the box of the cells"
 
 
 def test_incidence_lists_each_pair_at_its_moving_ends():

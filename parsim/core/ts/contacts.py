@@ -6,7 +6,7 @@ A pair is *in contact* when ``phi_ij >= 0`` (eq. 3.2), that is ``|X_i - X_j| <= 
 
 import numpy as np
 
-from parsim.core.celllist import block_cells, cell_index, grid_size, neighbour_offsets
+from parsim.core.celllist import block_cells, build_cells, cell_index, grid_size, move_to_cell, neighbour_offsets
 from parsim.core.jit import jit
 from parsim.core.ts.links import are_linked
 
@@ -139,16 +139,78 @@ def candidate_pairs(P, R, n_moving, reach):
     return _pairs_of(P, R, np.arange(n_moving), n_moving, reach)
 
 
-def updated_candidate_pairs(P, R, n_moving, reach, pair_a, pair_b, moved):
+class BinnedRows:
+    """The rows of a minimisation binned on a cell grid where their candidate pairs were last
+    searched, so that a refresh (:func:`updated_candidate_pairs`) rebins and searches the moved
+    rows alone instead of sorting every row again.
+
+    Cells are ``2 max R + 4/3 reach`` wide: a row is at most ``reach / 3`` from where it is
+    binned (the contract of :func:`updated_candidate_pairs`), so every row within ``reach`` of a
+    query is binned in the block of cells around the query's.  Rows outside the grid, which
+    covers the rows where it was built, are binned in the nearest edge cell.
+    """
+
+    def __init__(self, P, R, reach):
+        empty = P.shape[0] == 0  # a rank may hold no sphere of a minimisation
+        self.lower = np.zeros(P.shape[1]) if empty else P.min(axis=0)
+        extent = 0.0 if empty else float((P - self.lower).max()) + 1e-12
+        cutoff = 2.0 * (0.0 if empty else float(R.max())) + 4.0 * reach / 3.0
+        self.k, self.side = grid_size(max(extent, cutoff), cutoff, P.shape[1], P.shape[0])
+        self.head, self.next, self.prev, self.cell_of, self.count = build_cells(P - self.lower, self.side, self.k)
+
+    def pairs_of(self, P, R, queries, n_moving, reach):
+        """Pairs ``a < b`` (sorted) with an end in ``queries``, a moving end and a gap of at most
+        ``reach``, after binning the ``queries`` where they are now."""
+        pairs = _binned_pairs(P, R, self.lower, queries, reach, self.side, self.k, self.head, self.next, self.prev,
+                              self.cell_of, self.count)
+        return _sorted_moving_pairs(pairs, n_moving)
+
+
+@jit
+def _binned_pairs(X, R, lower, queries, reach, side, k, head, nxt, prv, cell_of, count):
+    """Rebin the ``queries`` at ``X`` and return the pairs ``(i, j)``, ``i`` a query, with a gap
+    of at most ``reach``; a pair of two queries once."""
+    n, d = X.shape
+    shifted = np.empty(d)
+    is_query = np.zeros(n, dtype=np.bool_)
+    for i in queries:
+        is_query[i] = True
+        for a in range(d):
+            shifted[a] = X[i, a] - lower[a]
+        move_to_cell(i, cell_index(shifted, side, k), head, nxt, prv, cell_of, count)
+    offsets = neighbour_offsets(d)
+    coords = np.empty(d, dtype=np.int64)
+    block = np.empty(offsets.shape[0], dtype=np.int64)
+    pairs = np.empty((16, 2), dtype=np.int64)
+    found = 0
+    for i in queries:
+        for b in range(block_cells(cell_of[i], k, offsets, coords, block)):
+            j = head[block[b]]
+            while j >= 0:
+                if j != i and not (is_query[j] and j < i):
+                    limit = R[i] + R[j] + reach
+                    if _distance_sq(X, i, j) <= limit * limit:
+                        pairs = _grow(pairs, found)
+                        pairs[found, 0] = i
+                        pairs[found, 1] = j
+                        found += 1
+                j = nxt[j]
+    return pairs[:found].copy()
+
+
+def updated_candidate_pairs(P, R, n_moving, reach, pair_a, pair_b, moved, binned):
     """The candidates after the rows flagged in ``moved`` have moved: the pairs ``(pair_a,
-    pair_b)`` (sorted) with no moved end, and the pairs of the moved rows searched afresh.
+    pair_b)`` (sorted) with no moved end, and the pairs of the moved rows searched afresh
+    (``binned``: a :class:`BinnedRows` of the rows where their pairs were last searched, updated).
+    Returns ``(a, b, source)``, ``source`` the index of each pair in ``(pair_a, pair_b)``, -1 for
+    a pair that was not there.
 
     This is a Verlet list refreshed sphere by sphere.  If every sphere stays within ``h`` of
     where its pairs were last searched and ``3 h <= reach``, a pair missing from the list had
     a gap above ``reach`` when it was last searched and has come at most ``3 h`` closer since:
     it does not touch.
     """
-    fresh_a, fresh_b = _pairs_of(P, R, np.flatnonzero(moved), n_moving, reach)
+    fresh_a, fresh_b = binned.pairs_of(P, R, np.flatnonzero(moved), n_moving, reach)
     return _merge_kept(pair_a, pair_b, moved, fresh_a, fresh_b)
 
 
@@ -164,7 +226,11 @@ def _pairs_of(P, R, queries, n_moving, reach):
     cutoff = 2.0 * float(R.max()) + reach
     k, side = grid_size(max(extent, cutoff), cutoff, P.shape[1], P.shape[0])
     # anchors are not queries: anchor pairs are seen from their moving end only
-    pairs = _near_pairs(shifted, R, queries, np.arange(P.shape[0]), reach, side, k)
+    return _sorted_moving_pairs(_near_pairs(shifted, R, queries, np.arange(P.shape[0]), reach, side, k), n_moving)
+
+
+def _sorted_moving_pairs(pairs, n_moving):
+    """The rows ``(i, j)`` of ``pairs`` as ``a = min < b = max`` with ``a`` moving, sorted by ``(a, b)``."""
     a, b = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
     keep = a < n_moving
     a, b = a[keep], b[keep]
@@ -175,26 +241,29 @@ def _pairs_of(P, R, queries, n_moving, reach):
 @jit
 def _merge_kept(pair_a, pair_b, moved, fresh_a, fresh_b):
     """The sorted union of the pairs with no end in ``moved`` and the sorted fresh pairs
-    (which all have an end in ``moved``, so the two sets are disjoint)."""
+    (which all have an end in ``moved``, so the two sets are disjoint), with the index of each
+    in ``pair_a`` (-1 for a pair that was not a candidate before)."""
     n = pair_a.shape[0] + fresh_a.shape[0]
     out_a = np.empty(n, dtype=np.int64)
     out_b = np.empty(n, dtype=np.int64)
+    source = np.empty(n, dtype=np.int64)
     count = 0
     f = 0
     for p in range(pair_a.shape[0]):
-        if moved[pair_a[p]] or moved[pair_b[p]]:
-            continue
         while f < fresh_a.shape[0] and (fresh_a[f], fresh_b[f]) < (pair_a[p], pair_b[p]):
-            out_a[count], out_b[count] = fresh_a[f], fresh_b[f]
+            out_a[count], out_b[count], source[count] = fresh_a[f], fresh_b[f], -1
             count += 1
             f += 1
-        out_a[count], out_b[count] = pair_a[p], pair_b[p]
-        count += 1
+        found_again = f < fresh_a.shape[0] and fresh_a[f] == pair_a[p] and fresh_b[f] == pair_b[p]
+        if found_again or not (moved[pair_a[p]] or moved[pair_b[p]]):
+            out_a[count], out_b[count], source[count] = pair_a[p], pair_b[p], p
+            count += 1
+            f += 1 if found_again else 0
     while f < fresh_a.shape[0]:
-        out_a[count], out_b[count] = fresh_a[f], fresh_b[f]
+        out_a[count], out_b[count], source[count] = fresh_a[f], fresh_b[f], -1
         count += 1
         f += 1
-    return out_a[:count].copy(), out_b[:count].copy()
+    return out_a[:count].copy(), out_b[:count].copy(), source[:count].copy()
 
 
 @jit

@@ -340,6 +340,22 @@ def _constraint_values(P, R, pair_a, pair_b, phi):
 
 
 @jit
+def _carried(source, lam, phi, P, R, pair_a, pair_b):
+    """Multiplier and constraint value of each pair after a refresh of the candidate pairs:
+    those of the same pair before (``source``; ``phi`` is kept current by the multiplier
+    updates), and 0 and (3.4) for a new pair."""
+    new_lam = np.zeros(source.shape[0])
+    new_phi = np.empty(source.shape[0])
+    for p in range(source.shape[0]):
+        if source[p] >= 0:
+            new_lam[p] = lam[source[p]]
+            new_phi[p] = phi[source[p]]
+        else:
+            new_phi[p] = _phi(P, R, pair_a[p], pair_b[p])
+    return new_lam, new_phi
+
+
+@jit
 def _wake_partners(i, n_moving, is_awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, woken, count):
     """Wake the moving partners (links and candidate pairs) of sphere ``i``; returns the new count."""
     for e in range(link_ptr[i], link_ptr[i + 1]):
@@ -703,9 +719,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
                 return Outcome(False, iteration, mean_overlap, deepest, largest, True, lam, left_halo=True)
             drift = _rebase(P, built_at, REFRESH_SET * REFRESH_DRIFT * problem.reach, moved)
             exchange.share(moved)
-            lam = problem.refresh_pairs(lam, moved)
-            phi = np.empty(problem.pair_a.size)
-            _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
+            lam, phi = _carried(problem.refresh_pairs(moved), lam, phi, P, R, problem.pair_a, problem.pair_b)
         if full:
             awake = _drop_settled(everyone, settled, is_awake) if any_settled else everyone
         stepped = awake

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsim.core.jit import jit
-from parsim.core.ts.contacts import candidate_pairs, incidence, updated_candidate_pairs
+from parsim.core.ts.contacts import BinnedRows, candidate_pairs, incidence, updated_candidate_pairs
 from parsim.core.ts.links import link_index
 
 
@@ -64,22 +64,29 @@ class Problem:
     ghost_partner: np.ndarray = None
     cross_link_from: np.ndarray = None  #: the moving end of each link to a moving ghost ...
     cross_link_ghost: np.ndarray = None  #: ... and its ghost row
+    binned: BinnedRows = None  #: the members where their pairs were last searched
 
-    def refresh_pairs(self, multipliers=None, moved=None):
+    def refresh_pairs(self, moved=None):
         """Recompute the candidate pairs at the current positions, all of them or (``moved``, a
-        flag per member) only those of the moved members (:func:`updated_candidate_pairs`);
-        returns their multipliers (those of pairs that stay candidates are kept, new pairs
-        start at 0)."""
-        old_a, old_b = self.pair_a, self.pair_b
+        flag per member) only those of the moved members (:func:`updated_candidate_pairs`).
+        Returns the index of each pair among the pairs before (-1 for a new one), or ``None``
+        after a search of all of them."""
+        source = None
         if moved is None:
             self.pair_a, self.pair_b = candidate_pairs(self.positions, self.radii, self.n_moving, self.reach)
+            self.binned = BinnedRows(self.positions, self.radii, self.reach)
         else:
-            self.pair_a, self.pair_b = updated_candidate_pairs(self.positions, self.radii, self.n_moving, self.reach,
-                                                               old_a, old_b, moved)
+            self.pair_a, self.pair_b, source = updated_candidate_pairs(self.positions, self.radii, self.n_moving,
+                                                                       self.reach, self.pair_a, self.pair_b, moved,
+                                                                       self.binned)
         self.pair_ptr, self.pair_of = incidence(self.pair_a, self.pair_b, self.n_moving)
-        crossing = self.moving_ghost[self.pair_b]  # pair_a < n_moving <= pair_b for these
-        self.cross_pairs = np.flatnonzero(crossing)
-        self.pair_counted = ~(crossing & (self.members[self.pair_b] < self.members[self.pair_a]))
+        if self.moving_ghost[self.first_ghost:].any():
+            crossing = self.moving_ghost[self.pair_b]  # pair_a < n_moving <= pair_b for these
+            self.cross_pairs = np.flatnonzero(crossing)
+            self.pair_counted = ~(crossing & (self.members[self.pair_b] < self.members[self.pair_a]))
+        else:
+            self.cross_pairs = np.empty(0, dtype=np.int64)
+            self.pair_counted = np.ones(self.pair_a.size, dtype=np.bool_)
         if self.cross_link_from is None:  # links do not change during a minimisation
             from_row = np.repeat(np.arange(self.n_moving), np.diff(self.link_ptr))
             crossing_link = self.moving_ghost[self.link_to]
@@ -88,27 +95,11 @@ class Problem:
                                                              self.cross_link_from, self.cross_link_ghost,
                                                              self.moving_ghost.shape[0] - self.first_ghost,
                                                              self.first_ghost)
-        if multipliers is None:
-            return np.zeros(self.pair_a.size)
-        return _carried(old_a, old_b, multipliers, self.pair_a, self.pair_b)
+        return source
 
     def pair_links(self, links):
         """Index in ``links`` of each candidate pair, -1 for a pair that is not linked."""
         return _pair_links(self.members, self.pair_a, self.pair_b, links.head, links.next, links.to)
-
-
-@jit
-def _carried(old_a, old_b, old_values, pair_a, pair_b):
-    """The value of each pair ``(pair_a, pair_b)`` in ``old_values`` over ``(old_a, old_b)``,
-    0 where it is new; both pair lists are sorted."""
-    values = np.zeros(pair_a.shape[0])
-    q = 0
-    for p in range(pair_a.shape[0]):
-        while q < old_a.shape[0] and (old_a[q], old_b[q]) < (pair_a[p], pair_b[p]):
-            q += 1
-        if q < old_a.shape[0] and old_a[q] == pair_a[p] and old_b[q] == pair_b[p]:
-            values[p] = old_values[q]
-    return values
 
 
 @jit
