@@ -12,12 +12,15 @@ from parsim.core.ts.links import are_linked
 
 
 @jit
-def _grow(pairs, count):
-    if count < pairs.shape[0]:
-        return pairs
-    bigger = np.empty((2 * pairs.shape[0] + 16, 2), dtype=np.int64)
-    bigger[:count] = pairs[:count]
-    return bigger
+def _with_pair(pairs, count, i, j):
+    """``pairs`` (grown if full) with ``(i, j)`` written at row ``count``."""
+    if count == pairs.shape[0]:
+        bigger = np.empty((2 * pairs.shape[0] + 16, 2), dtype=np.int64)
+        bigger[:count] = pairs[:count]
+        pairs = bigger
+    pairs[count, 0] = i
+    pairs[count, 1] = j
+    return pairs
 
 
 @jit
@@ -92,9 +95,7 @@ def _near_pairs(X, R, queries, group, reach, side, k):
                     continue
                 limit = radius[s] + radius[t] + reach
                 if _distance_sq(Xs, s, t) <= limit * limit:
-                    pairs = _grow(pairs, count)
-                    pairs[count, 0] = i
-                    pairs[count, 1] = j
+                    pairs = _with_pair(pairs, count, i, j)
                     count += 1
     return pairs[:count].copy()
 
@@ -190,9 +191,7 @@ def _binned_pairs(X, R, lower, queries, reach, side, k, head, nxt, prv, cell_of,
                 if j != i and not (is_query[j] and j < i):
                     limit = R[i] + R[j] + reach
                     if _distance_sq(X, i, j) <= limit * limit:
-                        pairs = _grow(pairs, found)
-                        pairs[found, 0] = i
-                        pairs[found, 1] = j
+                        pairs = _with_pair(pairs, found, i, j)
                         found += 1
                 j = nxt[j]
     return pairs[:found].copy()
