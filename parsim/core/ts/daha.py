@@ -587,16 +587,16 @@ def _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
 
 
 @jit
-def _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_deep_tile):
-    """Per tile, 1.0 if one of its moving spheres overlaps a moving sphere of a tile whose
-    deepest overlap is above ``eps_max`` (``in_deep_tile``, per row), else 0.0."""
+def _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_tile):
+    """Per tile, 1.0 if one of its moving spheres overlaps a moving sphere of a jammed tile
+    (``in_jammed_tile``, per row; module docstring, "Jammed tiles"), else 0.0."""
     pressed = np.zeros(n_tiles)
     for p in range(phi.shape[0]):
         if phi[p] > 0.0:
             a, b = pair_a[p], pair_b[p]
-            if in_deep_tile[b]:
+            if in_jammed_tile[b]:
                 pressed[tile_of[a]] = 1.0
-            if in_deep_tile[a] and b < n_moving:
+            if in_jammed_tile[a] and b < n_moving:
                 pressed[tile_of[b]] = 1.0
     return pressed
 
@@ -703,7 +703,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     settled = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows in settled tiles, ghost rows as on their owner
     any_settled = False
     jammed_checks = np.zeros(n_tiles, dtype=np.int64)
-    in_deep_tile = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghost rows as on their owner
+    in_jammed_tile = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghost rows as on their owner
     sleep = params.sleep_tolerance
     polishing = False
     iteration = 0
@@ -775,9 +775,9 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
         jammed_checks = np.where(steady & too_deep, jammed_checks + 1, 0)
         jammed = jammed_checks >= JAMMED_CHECKS
         if jammed.any() and done.any():  # a jammed tile holds open the tiles pressing on it
-            in_deep_tile[:n_moving] = jammed[tile_of]
-            exchange.share(in_deep_tile)
-            pressed = _pressed_tiles(phi, problem.pair_a, problem.pair_b, n_moving, tile_of, n_tiles, in_deep_tile)
+            in_jammed_tile[:n_moving] = jammed[tile_of]
+            exchange.share(in_jammed_tile)
+            pressed = _pressed_tiles(phi, problem.pair_a, problem.pair_b, n_moving, tile_of, n_tiles, in_jammed_tile)
             done &= exchange.max_array(pressed) == 0.0
         any_settled = bool(done.any())
         settled[:n_moving] = done[tile_of]
