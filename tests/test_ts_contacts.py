@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from parsim.core.ts.contacts import BinnedRows, candidate_pairs, incidence, updated_candidate_pairs
+from parsim.core.celllist import grid_size
+from parsim.core.ts.contacts import BinnedRows, candidate_pairs, incidence, unlinked_contacts, updated_candidate_pairs
+from parsim.core.ts.links import LinkSet
 from parsim.core.ts.daha import REFRESH_DRIFT, REFRESH_SET
 
 
@@ -69,3 +71,24 @@ def test_incidence_lists_each_pair_at_its_moving_ends():
     b = np.array([1, 3, 2, 3])  # sphere 3 is an anchor
     ptr, pair_of = incidence(a, b, 3)
     assert [sorted(pair_of[ptr[i]:ptr[i + 1]].tolist()) for i in range(3)] == [[0, 1], [0, 2], [2, 3]]
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_contacts_made_by_a_minimisation_are_those_of_the_moved_spheres_not_linked(d):
+    """After some spheres moved (a corner of the box, as after a local minimisation), the
+    contacts with a moved end are found, each once, except the linked ones."""
+    rng = np.random.default_rng(20 + d)
+    n, L = 400, 6.0 if d == 2 else 3.0
+    X = rng.uniform(0.0, L, (n, d))
+    R = rng.uniform(0.15, 0.25, n)
+    moved = np.flatnonzero((X < L / 3).all(axis=1))
+    touching = brute_force_pairs(X, R, n, 0.0)
+    expected = {(i, j) for i, j in touching if i in moved or j in moved}
+    linked = sorted(expected)[::3]
+    links = LinkSet(n)
+    links.add(np.array([i for i, _ in linked]), np.array([j for _, j in linked]), 1)
+    k, side = grid_size(L, 2 * R.max(), d, n)
+    found = unlinked_contacts(X, R, moved, side, k, np.arange(n), links.head, links.next, links.to)
+    pairs = [tuple(sorted(p)) for p in found.tolist()]
+    assert len(pairs) == len(set(pairs)) and set(pairs) == expected - set(linked)
+    assert len(expected) > 10 and len(linked) > 3

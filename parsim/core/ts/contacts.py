@@ -122,12 +122,38 @@ def _unlinked(pairs, global_id, link_head, link_next, link_to):
     return kept[:count].copy()
 
 
+@jit
+def _rows_near(X, rows, side, k):
+    """The rows of ``X`` (ascending) in the cells of the blocks around the cells of ``rows``:
+    every row within one cell side of one of them."""
+    n, d = X.shape
+    marked = np.zeros(k**d, dtype=np.bool_)
+    offsets = neighbour_offsets(d)
+    coords = np.empty(d, dtype=np.int64)
+    block = np.empty(offsets.shape[0], dtype=np.int64)
+    for i in rows:
+        for b in range(block_cells(cell_index(X[i], side, k), k, offsets, coords, block)):
+            marked[block[b]] = True
+    near = np.empty(n, dtype=np.int64)
+    count = 0
+    for j in range(n):
+        if marked[cell_index(X[j], side, k)]:
+            near[count] = j
+            count += 1
+    return near[:count]
+
+
 def unlinked_contacts(X, R, moved, side, k, global_id, link_head, link_next, link_to):
     """Pairs of rows in contact with at least one row in ``moved`` whose spheres are not linked
     (eq. 3.2); a pair of two moved rows is reported once.  Row ``i`` is sphere
-    ``global_id[i]`` of the link set."""
-    n = X.shape[0]
-    touching = _near_pairs(X, R, moved, np.arange(n), 0.0, side, k)
+    ``global_id[i]`` of the link set.
+
+    Only the rows near the moved ones are sorted into cells: after a minimisation of a few
+    clusters that is a small part of the box (at N = 102 400 the search over the whole box
+    cost 11 ms a round)."""
+    near = _rows_near(X, moved, side, k)
+    queries = np.searchsorted(near, moved)
+    touching = near[_near_pairs(X[near], R[near], queries, np.arange(near.size), 0.0, side, k)]
     return _unlinked(touching, global_id, link_head, link_next, link_to)
 
 
