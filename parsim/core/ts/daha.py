@@ -330,13 +330,6 @@ def _attracting_links(P, link_ptr, link_to, range_sq):
 
 
 @jit
-def _accept(P, new, awake):
-    for i in awake:
-        for k in range(P.shape[1]):
-            P[i, k] = new[i, k]
-
-
-@jit
 def _constraint_values(P, R, pair_a, pair_b, phi):
     """``phi`` of every candidate pair at ``P`` (eq. 3.4)."""
     for p in range(pair_a.shape[0]):
@@ -518,6 +511,7 @@ def _rebase(P, built_at, far, moved):
 
 @jit
 def _copy_rows(target, source, rows):
+    """``target[i] = source[i]`` for ``i`` in ``rows``."""
     for i in rows:
         for k in range(target.shape[1]):
             target[i, k] = source[i, k]
@@ -734,7 +728,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
                          problem.pair_a, problem.pair_b, lam, sphere_overlap, guarded, params.dynamic, delta,
                          params.attraction, params.penalty, params.damping, attracts, new, damping_of,
                          STIFFNESS_LIMIT)
-        _accept(P, new, awake)
+        _copy_rows(P, new, awake)  # accept the new positions
         exchange.share(P)
         if params.dynamic:
             exchange.share(damping_of)
