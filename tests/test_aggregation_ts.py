@@ -14,6 +14,7 @@ from parsim.core.ts.contacts import cross_cluster_contacts
 from parsim.core.ts.daha import FULL_SWEEP_EVERY, attraction_energy, minimise
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import build_problem
+from parsim.core.ts.quiet import Watch
 from tests.datasets import reproducible_part, run_serial
 from tests.mpi import parsim_command, run_mpi
 
@@ -254,8 +255,19 @@ def test_two_discs_link_at_the_first_step_they_overlap(monkeypatch):
 
 
 def test_quiet_steps_change_nothing_but_round_off(monkeypatch):
+    """Quiet steps fused into one advection, and contact searches answered by the watch, give the
+    links of the run that searches the whole box at every step."""
     x, v, radii, masses, length = paper_system(200, 0.1, seed=6)
+    watched = []
+    real_contacts = Watch.contacts
+
+    def contacts(watch, *args):
+        watched.append(1)
+        return real_contacts(watch, *args)
+
+    monkeypatch.setattr(Watch, "contacts", contacts)
     fused = simulate_ts(x, v, radii, masses, length)
+    assert len(watched) > 10
     monkeypatch.setattr(stepper._Run, "quiet_steps", lambda self, dt: 0.0)
     stepwise = simulate_ts(x, v, radii, masses, length)
     assert np.array_equal(fused.links, stepwise.links) and np.array_equal(fused.link_steps, stepwise.link_steps)

@@ -105,7 +105,16 @@ def cross_cluster_contacts(X, R, cluster, side, k):
 
     The grid (``k`` cells per side of length ``side >= 2 max R``) covers the box.
     """
-    return _near_pairs(X, R, np.arange(X.shape[0]), cluster, 0.0, side, k)
+    return cross_cluster_pairs(X, R, cluster, np.arange(X.shape[0]), 0.0, side, k)
+
+
+def cross_cluster_pairs(X, R, cluster, queries, reach, side, k):
+    """Pairs ``(i, j)``, ``i`` in ``queries``, of spheres of different clusters with a gap of at
+    most ``reach`` (a pair of two queries once, ``i < j``), shape ``(m, 2)``.
+
+    The grid (``k`` cells per side of length ``side >= 2 max R + reach``) covers the box.
+    """
+    return _near_pairs(X, R, queries, cluster, reach, side, k)
 
 
 @jit
@@ -146,15 +155,28 @@ def _rows_near(X, rows, side, k):
 def unlinked_contacts(X, R, moved, side, k, global_id, link_head, link_next, link_to):
     """Pairs of rows in contact with at least one row in ``moved`` whose spheres are not linked
     (eq. 3.2); a pair of two moved rows is reported once.  Row ``i`` is sphere
-    ``global_id[i]`` of the link set.
+    ``global_id[i]`` of the link set.  The grid (``k`` cells per side of length ``side >=
+    2 max R``) covers the box.
 
-    Only the rows near the moved ones are sorted into cells: after a minimisation of a few
-    clusters that is a small part of the box (at N = 102 400 the search over the whole box
-    cost 11 ms a round)."""
+    Only the rows near the moved ones are sorted, into cells over their bounding box: after a
+    minimisation of a few clusters that is a small part of the box (at N = 102 400 the search
+    over the whole box cost 11 ms a round, 6.5 ms over the near rows in the whole box's cells)."""
     near = _rows_near(X, moved, side, k)
+    if near.size < 2:  # a rank may hold no moved sphere
+        return np.empty((0, 2), dtype=np.int64)
     queries = np.searchsorted(near, moved)
-    touching = near[_near_pairs(X[near], R[near], queries, np.arange(near.size), 0.0, side, k)]
+    shifted, near_k, near_side = _bounding_grid(X[near], side)
+    touching = near[_near_pairs(shifted, R[near], queries, np.arange(near.size), 0.0, near_side, near_k)]
     return _unlinked(touching, global_id, link_head, link_next, link_to)
+
+
+def _bounding_grid(P, cutoff):
+    """``(P - lower, k, side)``: the points moved so that their bounding box starts at the
+    origin, and a grid over that box (``k`` cells per side of length ``side >= cutoff``)."""
+    shifted = P - P.min(axis=0)
+    extent = float(shifted.max()) + 1e-12
+    k, side = grid_size(max(extent, cutoff), cutoff, P.shape[1], P.shape[0])
+    return shifted, k, side
 
 
 def candidate_pairs(P, R, n_moving, reach):
@@ -245,11 +267,7 @@ def _pairs_of(P, R, queries, n_moving, reach):
     if P.shape[0] < 2 or queries.size == 0:
         empty = np.empty(0, dtype=np.int64)
         return empty, empty
-    lower = P.min(axis=0)
-    shifted = P - lower
-    extent = float(shifted.max()) + 1e-12
-    cutoff = 2.0 * float(R.max()) + reach
-    k, side = grid_size(max(extent, cutoff), cutoff, P.shape[1], P.shape[0])
+    shifted, k, side = _bounding_grid(P, 2.0 * float(R.max()) + reach)
     # anchors are not queries: anchor pairs are seen from their moving end only
     return _sorted_moving_pairs(_near_pairs(shifted, R, queries, np.arange(P.shape[0]), reach, side, k), n_moving)
 

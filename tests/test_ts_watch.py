@@ -1,0 +1,76 @@
+"""The watch of the time-stepping method: the pairs of clusters that can touch soon, checked
+against brute force."""
+
+import numpy as np
+import pytest
+
+from parsim.core.celllist import grid_size
+from parsim.core.ts.contacts import cross_cluster_pairs
+from parsim.core.ts.quiet import Watch
+
+
+def cross_contacts(X, R, cluster):
+    """Pairs ``i < j`` of different clusters in contact, by brute force, as a set."""
+    gap = np.linalg.norm(X[:, None] - X[None], axis=2) - (R[:, None] + R[None])
+    a, b = np.nonzero(np.triu((gap <= 0.0) & (cluster[:, None] != cluster[None]), k=1))
+    return set(zip(a.tolist(), b.tolist()))
+
+
+def discs_in_clusters(seed, side=16, spacing=0.5):
+    """Discs on a square lattice, gaps 0.06 to 0.14, in 30 clusters moving rigidly (one
+    velocity per cluster)."""
+    rng = np.random.default_rng(seed)
+    n = side * side
+    X = spacing * (np.stack(np.unravel_index(np.arange(n), (side, side)), axis=1) + 0.5)
+    R = rng.uniform(0.18, 0.22, n)
+    cluster = rng.integers(0, 30, n)
+    velocity = rng.normal(0.0, 1.0, (30, 2))
+    return X, velocity[cluster], R, cluster, side * spacing
+
+
+def make_watch(X, R, cluster, box, horizon):
+    k, side = grid_size(box, 2.0 * R.max() + horizon, 2, X.shape[0])
+    pairs = cross_cluster_pairs(X, R, cluster, np.arange(X.shape[0]), horizon, side, k)
+    return Watch(np.sort(pairs, axis=1), horizon)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_every_contact_is_watched_while_the_slack_lasts(seed):
+    """Clusters fly, and their discs jump at random besides (as in reflections and minimisations);
+    the slack shrinks by twice the longest move of each round.  As long as it is positive, the
+    watch's contacts are exactly the contacts of the whole box."""
+    X, V, R, cluster, box = discs_in_clusters(seed)
+    rng = np.random.default_rng(100 + seed)
+    watch = make_watch(X, R, cluster, box, horizon=1.0)
+    rounds, contacts = 0, 0
+    while True:
+        jump = 0.02 * V + rng.normal(0.0, 0.005, X.shape)
+        longest = np.linalg.norm(jump, axis=1).max()
+        watch.close_by(2.0 * longest)
+        if not watch.valid:
+            break
+        X = X + jump
+        found = watch.contacts(X, R, cluster, np.arange(X.shape[0]))
+        assert {(min(i, j), max(i, j)) for i, j in found.tolist()} == cross_contacts(X, R, cluster)
+        rounds += 1
+        contacts += found.shape[0]
+    assert rounds >= 5 and contacts > 0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_no_contact_within_the_quiet_steps(seed):
+    """Clusters fly straight: no pair of different clusters touches within the bound the
+    watch gives, and the step after it, which the watch must still answer, leaves slack."""
+    X, V, R, cluster, box = discs_in_clusters(seed)
+    dt = 0.01
+    fastest = np.linalg.norm(V, axis=1).max()
+    watch = make_watch(X, R, cluster, box, horizon=1.0)
+    ids = np.arange(X.shape[0])
+    quiet = watch.quiet_steps(X, V, R, cluster, ids, dt, fastest)
+    assert 0 < quiet < watch.lasts(dt, fastest)
+    for j in range(1, int(quiet) + 1):
+        assert not cross_contacts(X + j * dt * V, R, cluster)
+    watch.close_by(2.0 * (quiet + 1) * dt * fastest)
+    assert watch.valid
+    touching = {(min(i, j), max(i, j)) for i, j in watch.contacts(X + (quiet + 1) * dt * V, R, cluster, ids).tolist()}
+    assert touching == cross_contacts(X + (quiet + 1) * dt * V, R, cluster)
