@@ -154,6 +154,7 @@ class _Run:
         self.work = 0.0
         self.horizon_steps = QUIET_HORIZON_STEPS[0]
         self.watch = None  # the pairs that can touch soon (a Watch), while it holds
+        self._fastest = None  # max |V|, once computed
 
     def advect(self, dt):
         """Step 1: free flight, then the whole-cluster wall reflection; returns the reflections made."""
@@ -183,12 +184,17 @@ class _Run:
                 self.watch = None
 
     def fastest(self):
-        local = float(np.sqrt((self.V**2).sum(axis=1)).max()) if self.X.shape[0] else 0.0
-        return self.domain.max(local)
+        """``max |V_i|`` over all spheres; kept until a merge, as reflections only turn velocities."""
+        if self._fastest is None:
+            local = float(np.sqrt((self.V**2).sum(axis=1)).max()) if self.X.shape[0] else 0.0
+            self._fastest = self.domain.max(local)
+        return self._fastest
 
     def _with_ghosts(self, width):
-        """Owned and ghost rows: ``(halo, global ids, positions)``."""
+        """Owned and ghost rows: ``(halo, global ids, positions)``, to be read, not written."""
         halo = self.domain.ghosts(self.X, self.global_id, width)
+        if self.domain.size == 1:  # no ghosts: spare the copies (0.2 ms at N = 102 400)
+            return halo, self.global_id, self.X
         ids = np.concatenate([self.global_id, halo.ghost_global_id])
         return halo, ids, np.concatenate([self.X, halo.exchange(self.X)])
 
@@ -246,9 +252,9 @@ class _Run:
         (both ends move), and ``drift``, how far spheres moved earlier in the time step."""
         return max(self.contact + self.reach, self.min_tile) + 2.0 * self.margin + drift
 
-    def _drift(self, start):
-        """Largest displacement of any sphere since ``start`` (owned rows)."""
-        local = float(np.sqrt(((self.X - start) ** 2).sum(axis=1)).max()) if start.shape[0] else 0.0
+    def _drift(self, start, rows):
+        """Largest displacement since ``start`` of the owned ``rows``, over all processes."""
+        local = float(np.sqrt(((self.X[rows] - start[rows]) ** 2).sum(axis=1)).max()) if rows.size else 0.0
         return self.domain.max(local)
 
     def interact(self, step, time):
@@ -269,7 +275,7 @@ class _Run:
         drift = 0.0  # how far any sphere has moved since the step's free flight
         for _ in range(MAX_LINK_ROUNDS):
             moving = self._minimise(np.concatenate(made), made[-1], step, time, drift)
-            drift = self._drift(start)
+            drift = max(drift, self._drift(start, moving))  # only the moving rows have moved
             _, ids, X = self._with_ghosts(self.contact + drift)
             touching = unlinked_contacts(X, self.R_all[ids], moving, self.grid_side, self.grid_k, ids,
                                          self.links.head, self.links.next, self.links.to)
@@ -287,6 +293,7 @@ class _Run:
         own_labels = labels[self.global_id]  # step 3, eq. 2.9
         sums = self.domain.sum_array(cluster_momenta(self.V, self.m_all[self.global_id], own_labels, merged))
         set_cluster_velocities(self.V, own_labels, merged, sums)
+        self._fastest = None
         self.cluster, self.n_clusters = labels, m
         return True
 
