@@ -244,7 +244,7 @@ class _Run:
         sorted, each once."""
         pairs = pairs[(pairs < n_owned).any(axis=1)] if pairs.size else pairs.reshape(0, 2)
         named = np.sort(ids[pairs], axis=1)
-        keys = np.unique(self.domain.gather(named[:, 0] * self.n + named[:, 1]))  # one key per pair: a 1-d sort, 6x faster
+        keys = np.unique(self.domain.gather(named[:, 0] * self.n + named[:, 1]))  # a 1-d sort: 6x faster
         return np.column_stack([keys // self.n, keys % self.n])
 
     def _problem_width(self, drift):
