@@ -22,9 +22,9 @@ steps).  Merges only remove pairs of different clusters.  While the slack is pos
 A look-ahead makes a new watch when the current one would not last two more steps, and it
 leaves one step of slack, so that the watch also answers the search of the step that ends a
 quiet stretch.  At N = 102 400, V_f = 0.1, watches answered 590 of the 826 contact searches
-(the others came before the first quiet step, 20 ms each over the whole box), and 280 of the
-472 look-aheads made a watch (29 ms each, as every look-ahead searched before).  Bounds are
-taken conservatively (round-off shortens them).
+(the others, 20 ms each over the whole box, came mostly before the first quiet step), and
+280 of the 472 look-aheads made a watch (29 ms each, as every look-ahead searched before).
+Bounds are taken conservatively (round-off shortens them).
 """
 
 import math
