@@ -165,18 +165,19 @@ def unlinked_contacts(X, R, moved, side, k, global_id, link_head, link_next, lin
     if near.size < 2:  # a rank may hold no moved sphere
         return np.empty((0, 2), dtype=np.int64)
     queries = np.searchsorted(near, moved)
-    shifted, near_k, near_side = _bounding_grid(X[near], side)
-    touching = near[_near_pairs(shifted, R[near], queries, np.arange(near.size), 0.0, near_side, near_k)]
+    lower, near_k, near_side = _bounding_grid(X[near], side)
+    touching = near[_near_pairs(X[near] - lower, R[near], queries, np.arange(near.size), 0.0, near_side, near_k)]
     return _unlinked(touching, global_id, link_head, link_next, link_to)
 
 
 def _bounding_grid(P, cutoff):
-    """``(P - lower, k, side)``: the points moved so that their bounding box starts at the
-    origin, and a grid over that box (``k`` cells per side of length ``side >= cutoff``)."""
-    shifted = P - P.min(axis=0)
-    extent = float(shifted.max()) + 1e-12
+    """``(lower, k, side)``: the lower corner of the points' bounding box (the origin if there
+    are none) and a grid over that box from there (``k`` cells per side of length
+    ``side >= cutoff``)."""
+    lower = P.min(axis=0) if P.shape[0] else np.zeros(P.shape[1])
+    extent = float((P - lower).max()) + 1e-12 if P.shape[0] else 0.0
     k, side = grid_size(max(extent, cutoff), cutoff, P.shape[1], P.shape[0])
-    return shifted, k, side
+    return lower, k, side
 
 
 def candidate_pairs(P, R, n_moving, reach):
@@ -200,11 +201,8 @@ class BinnedRows:
     """
 
     def __init__(self, P, R, reach):
-        empty = P.shape[0] == 0  # a rank may hold no sphere of a minimisation
-        self.lower = np.zeros(P.shape[1]) if empty else P.min(axis=0)
-        extent = 0.0 if empty else float((P - self.lower).max()) + 1e-12
-        cutoff = 2.0 * (0.0 if empty else float(R.max())) + 4.0 * reach / 3.0
-        self.k, self.side = grid_size(max(extent, cutoff), cutoff, P.shape[1], P.shape[0])
+        largest = float(R.max()) if R.size else 0.0  # a rank may hold no sphere of a minimisation
+        self.lower, self.k, self.side = _bounding_grid(P, 2.0 * largest + 4.0 * reach / 3.0)
         self.head, self.next, self.prev, self.cell_of, self.count = build_cells(P - self.lower, self.side, self.k)
 
     def pairs_of(self, P, R, queries, n_moving, reach):
@@ -267,9 +265,9 @@ def _pairs_of(P, R, queries, n_moving, reach):
     if P.shape[0] < 2 or queries.size == 0:
         empty = np.empty(0, dtype=np.int64)
         return empty, empty
-    shifted, k, side = _bounding_grid(P, 2.0 * float(R.max()) + reach)
+    lower, k, side = _bounding_grid(P, 2.0 * float(R.max()) + reach)
     # anchors are not queries: anchor pairs are seen from their moving end only
-    return _sorted_moving_pairs(_near_pairs(shifted, R, queries, np.arange(P.shape[0]), reach, side, k), n_moving)
+    return _sorted_moving_pairs(_near_pairs(P - lower, R, queries, np.arange(P.shape[0]), reach, side, k), n_moving)
 
 
 def _sorted_moving_pairs(pairs, n_moving):

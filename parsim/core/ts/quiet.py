@@ -32,6 +32,7 @@ import math
 import numpy as np
 
 from parsim.core.jit import jit
+from parsim.core.ts.contacts import _distance_sq
 
 #: Relative safety margin on every bound, far above round-off.
 MARGIN = 1e-9
@@ -47,13 +48,6 @@ def _steps_before(distance, closing):
     return math.floor(distance * (1.0 - MARGIN) / closing)
 
 
-@jit
-def _gap(X, R, i, j):
-    s = 0.0
-    for a in range(X.shape[1]):
-        dx = X[i, a] - X[j, a]
-        s += dx * dx
-    return math.sqrt(s) - R[i] - R[j]
 
 
 @jit
@@ -69,18 +63,23 @@ def _steps_before_touching(X, V, R, cluster, rows, dt):
         for a in range(X.shape[1]):
             dv = V[i, a] - V[j, a]
             w += dv * dv
-        steps = min(steps, _steps_before(_gap(X, R, i, j), math.sqrt(w) * dt))
+        gap = math.sqrt(_distance_sq(X, i, j)) - R[i] - R[j]
+        steps = min(steps, _steps_before(gap, math.sqrt(w) * dt))
     return steps
 
 
 @jit
 def _touching(X, R, cluster, rows):
-    """The pairs of ``rows`` (``-1``: not held here) of different clusters in contact."""
+    """The pairs of ``rows`` (``-1``: not held here) of different clusters in contact, by the
+    test of the whole-box search (:func:`parsim.core.ts.contacts.cross_cluster_contacts`)."""
     found = np.empty_like(rows)
     count = 0
     for p in range(rows.shape[0]):
         i, j = rows[p, 0], rows[p, 1]
-        if i >= 0 and j >= 0 and cluster[i] != cluster[j] and _gap(X, R, i, j) <= 0.0:
+        if i < 0 or j < 0 or cluster[i] == cluster[j]:
+            continue
+        contact = R[i] + R[j]
+        if _distance_sq(X, i, j) <= contact * contact:
             found[count] = rows[p]
             count += 1
     return found[:count].copy()
