@@ -83,7 +83,7 @@ PARAMETERS = (
     _ts("daha_attraction", float, _DAHA.attraction, "1", "DAHA alpha (eq. 4.1)", low=0.0, low_inclusive=False),
     _ts("daha_penalty", float, _DAHA.penalty, "1", "DAHA gamma; eq. 4.1 has 0.3", low=0.0),
     _ts("daha_multiplier_rate", float, _DAHA.multiplier_rate, "1", "DAHA beta (beta_bar of eq. 3.29 if "
-        "daha_dynamic; eq. 4.1)", low=0.0, low_inclusive=False),
+        "daha_dynamic); eq. 4.1 has 3", low=0.0, low_inclusive=False),
     _ts("daha_dynamic", bool, _DAHA.dynamic, "1", "damping and multiplier rate from eq. 3.29 (with a "
         "stability cap) instead of constants"),
     _ts("daha_overlap_tolerance", float, _DAHA.overlap_tolerance, LENGTH_UNITS, "eps_c of eq. 3.28 (eq. 4.1)",
