@@ -62,7 +62,8 @@ from parsim.core.ts.domain import SerialDomain
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import Ghosts, build_problem
 from parsim.core.ts.quiet import Watch, steps_before_wall
-from parsim.core.ts.tiles import later_round_tiles_per_side, select_spheres, tiles_of, tiles_per_side
+from parsim.core.ts.tiles import (later_round_tiles_per_side, select_spheres, stopping_cells_per_side, tiles_of,
+                                  tiles_per_side)
 
 FORMULATIONS = ("almost_rigid", "non_rigid")
 STOP_REASONS = ("single_cluster", "max_time", "max_steps")
@@ -357,12 +358,14 @@ class _Run:
         active = np.unique(self.domain.gather(tiles_of(self.X, seeds, self.L, k)))
         moving, anchors = select_spheres(self.X, involved[self.global_id], active, self.L, k)
         moving = moving[self._memory_order(moving)]
-        tile_of = np.searchsorted(active, tiles_of(self.X, moving, self.L, k))  # each tile stops on its own
+        cells = tiles_of(self.X, moving, self.L, stopping_cells_per_side(k, self.L, self.contact))
+        stopping_cells = np.unique(self.domain.gather(cells))  # each stops on its own (daha.minimise)
+        cell_of = np.searchsorted(stopping_cells, cells)
         while True:
             problem, exchange = self._problem(moving, anchors, drift)
             carried = self._carried_multipliers(problem) if self.daha.carry_multipliers else None
             outcome = minimise(problem, daha, self.attraction_range, exchange, multipliers=carried,
-                               tile_of=tile_of, n_tiles=active.size)
+                               tile_of=cell_of, n_tiles=stopping_cells.size)
             self.work += problem.n_moving * outcome.iterations
             if not outcome.left_halo:
                 break

@@ -32,6 +32,8 @@ ONE_TILE_BELOW = 1000
 TILE_GROWTH = 4.0 / 3.0
 #: Width of the tiles of later rounds of step 2e, in interaction ranges (the least tile width).
 LATER_ROUND_TILE_WIDTHS = 2.0
+#: Width of the cells a minimisation stops in one by one, in largest sphere diameters.
+STOPPING_CELL_DIAMETERS = 4.0
 
 
 def tiles_per_side(n_interacting, dimension, box_length, min_side):
@@ -46,8 +48,19 @@ def tiles_per_side(n_interacting, dimension, box_length, min_side):
 def later_round_tiles_per_side(n_interacting, dimension, box_length, min_side):
     """``k`` for a later round of step 2e: tiles ``LATER_ROUND_TILE_WIDTHS * min_side`` wide, or
     those of :func:`tiles_per_side` where these are finer."""
-    fine = int(math.floor(box_length / (LATER_ROUND_TILE_WIDTHS * min_side)))
-    return max(fine, tiles_per_side(n_interacting, dimension, box_length, min_side))
+    return max(_per_side(box_length, LATER_ROUND_TILE_WIDTHS * min_side),
+               tiles_per_side(n_interacting, dimension, box_length, min_side))
+
+
+def stopping_cells_per_side(k, box_length, diameter):
+    """Cells per side of the grid a minimisation in ``k`` tiles per side stops on cell by cell:
+    ``STOPPING_CELL_DIAMETERS`` largest diameters wide, or the tiles where these are finer."""
+    return max(_per_side(box_length, STOPPING_CELL_DIAMETERS * diameter), k)
+
+
+def _per_side(box_length, width):
+    """The most cells per side at least ``width`` wide (at least one)."""
+    return max(1, int(math.floor(box_length / width)))
 
 
 @jit
