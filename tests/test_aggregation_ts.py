@@ -294,6 +294,16 @@ def test_later_rounds_use_tiles_of_two_interaction_ranges_or_finer(n_interacting
     assert box / (later + 1) < tiles.LATER_ROUND_TILE_WIDTHS * least  # as fine as that allows
 
 
+@pytest.mark.parametrize("k", [1, 100, 500])
+def test_minimisations_stop_on_cells_of_four_diameters_or_on_finer_tiles(k):
+    box, diameter = 647.0, 0.4  # N = 10^6, V_f = 0.3, R = 0.2
+    cells = tiles.stopping_cells_per_side(k, box, diameter)
+    if k > box / (tiles.STOPPING_CELL_DIAMETERS * diameter):
+        assert cells == k
+    else:
+        assert box / (cells + 1) < tiles.STOPPING_CELL_DIAMETERS * diameter <= box / cells
+
+
 def test_a_later_round_that_fails_in_fine_tiles_is_solved_in_the_first_rounds(monkeypatch):
     """Every later round is made to fail in its fine tiles: the run still ends in one cluster
     without overlap, each failure (given FINE_TILE_ITERATIONS) followed by the same round in

@@ -17,6 +17,10 @@ tiles ``LATER_ROUND_TILE_WIDTHS`` interaction ranges wide, finer than the law ab
 ``#S`` exceeds a few thousand: at N = 102 400, V_f = 0.3 the paper's tiles (about 50 R wide)
 put some 30 000 spheres in a round made for a few hundred new links, and the later rounds took
 14 s of a 74 s run; with tiles 8 R wide they took 4.4 s (docs/benchmarks.md).
+
+A minimisation stops region by region (ours, :mod:`parsim.core.ts.daha`, "Stopping tile by
+tile"): on square cells ``STOPPING_CELL_DIAMETERS`` largest diameters wide, or on the tiles
+where those are finer.
 """
 
 import math
