@@ -52,7 +52,7 @@ after 200 iterations, and 38 000 spheres awake.  The dynamic rate of (3.29) mult
 ``beta_bar`` by ``sqrt(n) / phi_A``, over 10^3 in such a minimisation.  Our constant rate is
 ``beta = 10``: that minimisation then has 7 650 pairs deeper than ``eps_c`` and 8 750 spheres
 awake at iteration 200, needs 6.6 instead of 11.1 million sphere updates, and ends at a mean
-overlap of 0.0045 instead of 0.0084.  Whole runs take 25-35 % less time, and the TS-vs-ED table
+overlap of 0.0045 instead of 0.0084.  Whole runs take 15-40 % less time, and the TS-vs-ED table
 is unchanged within its spread (docs/benchmarks.md, session 11).  A faster rate gains little
 more and stops too early: at ``beta = 30`` two overlapping discs overshoot contact, and the
 iteration stops at a turning point of their oscillation, where for a moment every step is below
