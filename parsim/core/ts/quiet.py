@@ -87,7 +87,8 @@ def _touching(X, R, cluster, rows):
 
 class Watch:
     """Pairs of spheres of different clusters (global ids, ``(m, 2)``) that may touch before
-    ``slack`` runs out; see the module docstring.  Every process holds all of them."""
+    ``slack`` runs out; see the module docstring.  Every process holds all of them, in any
+    order; a pair found from both ends (on two processes) may be listed twice."""
 
     def __init__(self, pairs, horizon):
         self.pairs = pairs
