@@ -31,14 +31,14 @@ __all__ = [
 MAX_CELLS_PER_POINT = 8
 
 
-def grid_size(box_length, cutoff, dimension, n_points):
+def grid_size(box_length, cutoff, dimension, n_points, cells_per_point=MAX_CELLS_PER_POINT):
     """Cells per side ``k`` and cell side ``a = box_length / k`` with ``a >= cutoff``.
 
     ``k = floor(box_length / cutoff)``, at least 1, and at most what keeps ``k^d`` below
-    about ``MAX_CELLS_PER_POINT * n_points``.
+    about ``cells_per_point * n_points``.
     """
     k = max(1, int(math.floor(box_length / cutoff)))
-    cap = max(1, int(math.floor((MAX_CELLS_PER_POINT * n_points + 64) ** (1.0 / dimension))))
+    cap = max(1, int(math.floor((cells_per_point * n_points + 64) ** (1.0 / dimension))))
     k = min(k, cap)
     while k > 1 and box_length / k < cutoff:  # guard the floor against round-off
         k -= 1
