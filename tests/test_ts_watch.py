@@ -6,7 +6,8 @@ import pytest
 
 from parsim.core.celllist import grid_size
 from parsim.core.ts.contacts import cross_cluster_pairs
-from parsim.core.ts.quiet import Watch
+from parsim.core.ts.domain import SerialDomain
+from parsim.core.ts.quiet import Watch, closing_speed
 
 
 def cross_contacts(X, R, cluster):
@@ -16,15 +17,15 @@ def cross_contacts(X, R, cluster):
     return set(zip(a.tolist(), b.tolist()))
 
 
-def discs_in_clusters(seed, side=16, spacing=0.5):
+def discs_in_clusters(seed, side=16, spacing=0.5, drift=(0.0, 0.0)):
     """Discs on a square lattice, gaps 0.06 to 0.14, in 30 clusters moving rigidly (one
-    velocity per cluster)."""
+    velocity per cluster, about ``drift``)."""
     rng = np.random.default_rng(seed)
     n = side * side
     X = spacing * (np.stack(np.unravel_index(np.arange(n), (side, side)), axis=1) + 0.5)
     R = rng.uniform(0.18, 0.22, n)
     cluster = rng.integers(0, 30, n)
-    velocity = rng.normal(0.0, 1.0, (30, 2))
+    velocity = np.asarray(drift) + rng.normal(0.0, 1.0, (30, 2))
     return X, velocity[cluster], R, cluster, side * spacing
 
 
@@ -58,19 +59,40 @@ def test_every_contact_is_watched_while_the_slack_lasts(seed):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_no_contact_within_the_quiet_steps(seed):
+@pytest.mark.parametrize("drift", [(0.0, 0.0), (3.0, -2.0)])
+def test_no_contact_within_the_quiet_steps(seed, drift):
     """Clusters fly straight: no pair of different clusters touches within the bound the
     watch gives, and the step after it, which the watch must still answer, leaves slack."""
-    X, V, R, cluster, box = discs_in_clusters(seed)
+    X, V, R, cluster, box = discs_in_clusters(seed, drift=drift)
     dt = 0.01
-    fastest = np.linalg.norm(V, axis=1).max()
+    closing = closing_speed(V, SerialDomain())
     watch = make_watch(X, R, cluster, box, horizon=1.0)
     ids = np.arange(X.shape[0])
-    quiet = watch.quiet_steps(X, V, R, cluster, ids, dt, fastest)
-    assert 0 < quiet < watch.lasts(dt, fastest)
+    quiet = watch.quiet_steps(X, V, R, cluster, ids, dt, closing)
+    assert 0 < quiet < watch.lasts(dt, closing)
     for j in range(1, int(quiet) + 1):
         assert not cross_contacts(X + j * dt * V, R, cluster)
-    watch.close_by(2.0 * (quiet + 1) * dt * fastest)
+    watch.close_by((quiet + 1) * dt * closing)
     assert watch.valid
     touching = {(min(i, j), max(i, j)) for i, j in watch.contacts(X + (quiet + 1) * dt * V, R, cluster, ids).tolist()}
     assert touching == cross_contacts(X + (quiet + 1) * dt * V, R, cluster)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_closing_speed_bounds_every_relative_speed(seed):
+    """At least every |V_i - V_j|, at most twice max |V|; for clusters drifting together
+    (a common velocity of 10, spread 1) it is set by the spread, not by the drift."""
+    rng = np.random.default_rng(seed)
+    V = np.array([10.0, 0.0]) + rng.normal(0.0, 1.0, (40, 2))
+    closing = closing_speed(V, SerialDomain())
+    relative = np.linalg.norm(V[:, None] - V[None], axis=2).max()
+    assert relative <= closing <= 2.0 * np.linalg.norm(V, axis=1).max()
+    assert closing < 2.0 * relative  # the bounding-box centre is within the spread
+    still = closing_speed(np.zeros((3, 2)), SerialDomain())
+    assert still == 0.0
+
+
+def test_one_fast_cluster_among_still_ones_closes_at_its_own_speed():
+    """The late stage: a small cluster at speed 1, two at rest."""
+    V = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    assert closing_speed(V, SerialDomain()) == pytest.approx(1.0)

@@ -7,13 +7,14 @@ before the next collision, and each step would pay a contact search over the who
 A :class:`Watch` lists the pairs of spheres of different clusters with a gap of at most a
 horizon ``h`` when it is made, and keeps a *slack*: every pair of different clusters not
 listed has a gap above the slack.  The slack starts at ``h`` and shrinks by the most any pair
-can have closed since: ``2 max |V| dt`` per step of free flight, twice the longest jump of a
-wall reflection, twice the farthest a minimisation moved a sphere (a Verlet list over time
-steps).  Merges only remove pairs of different clusters.  While the slack is positive:
+can have closed since: ``w dt`` per step of free flight, with ``w`` the closing speed below,
+twice the longest jump of a wall reflection, twice the farthest a minimisation moved a sphere
+(a Verlet list over time steps).  Merges only remove pairs of different clusters.  While the
+slack is positive:
 
 - a time step's contacts are among the listed pairs: the whole-box search is not needed;
 - over ``j`` steps of constant ``dt`` a listed pair approaches by at most ``j dt |V_i - V_j|``
-  (straight lines), and an unlisted one by at most ``2 j dt max |V|``; a cluster whose
+  (straight lines), and an unlisted one by at most ``j dt w``; a cluster whose
   bounding box is inside the box reaches a wall after a number of steps read off its
   velocity.  The stepper advances all the steps before the first possible contact or
   reflection with one advection: the steps still happen (time, histories, the dt law),
@@ -25,6 +26,12 @@ quiet stretch.  At N = 102 400, V_f = 0.1, watches answered 590 of the 826 conta
 (the others, 20 ms each over the whole box, came mostly before the first quiet step), and
 280 of the 472 look-aheads made a watch (29 ms each, as every look-ahead searched before).
 Bounds are taken conservatively (round-off shortens them).
+
+The closing speed ``w`` bounds ``|V_i - V_j|`` over all pairs of spheres:
+``2 max_i |V_i - c|`` for any ``c``; :func:`closing_speed` takes the smaller of ``c = 0``
+(``2 max |V|``) and the centre of the velocities' bounding box.  In a late stage the fastest
+cluster is often a small one among slow ones, and ``w`` is then about its own speed rather
+than twice it, so a watch lasts up to twice as many steps.
 """
 
 import math
@@ -113,16 +120,30 @@ class Watch:
         pair while the watch is valid, if ``X`` holds every sphere within ``2 max R`` of one."""
         return _touching(X, R, cluster, self._rows(ids))
 
-    def lasts(self, dt, fastest):
-        """How many steps of length ``dt`` the watch certainly holds (``fastest = max |V|``)."""
-        return _steps_before(self.slack, 2.0 * fastest * dt)
+    def lasts(self, dt, closing):
+        """How many steps of length ``dt`` the watch certainly holds (``closing``: the closing
+        speed, :func:`closing_speed`)."""
+        return _steps_before(self.slack, closing * dt)
 
-    def quiet_steps(self, X, V, R, cluster, ids, dt, fastest):
+    def quiet_steps(self, X, V, R, cluster, ids, dt, closing):
         """How many steps of length ``dt`` certainly make no contact, if ``X`` holds every sphere
         within ``2 max R + slack`` of one held here (the minimum over processes is the bound).
         The watch still holds for the step after them, so that it answers that step's search."""
-        unlisted = max(self.lasts(dt, fastest) - 1.0, 0.0)
+        unlisted = max(self.lasts(dt, closing) - 1.0, 0.0)
         return min(unlisted, _steps_before_touching(X, V, R, cluster, self._rows(ids), dt))
+
+
+def closing_speed(V, domain):
+    """A bound on ``|V_i - V_j|`` over all spheres of the run: the rows ``V`` held here and,
+    through ``domain`` (:mod:`parsim.core.ts.domain`), those of other processes (module
+    docstring)."""
+    held = V.shape[0] > 0
+    high = np.array([domain.max(float(V[:, a].max()) if held else -math.inf) for a in range(V.shape[1])])
+    low = np.array([-domain.max(float(-V[:, a].min()) if held else -math.inf) for a in range(V.shape[1])])
+    centre = 0.5 * (high + low)
+    about_centre = float(np.sqrt(((V - centre) ** 2).sum(axis=1)).max()) if held else 0.0
+    about_zero = float(np.sqrt((V**2).sum(axis=1)).max()) if held else 0.0
+    return 2.0 * min(domain.max(about_centre), domain.max(about_zero))
 
 
 @jit

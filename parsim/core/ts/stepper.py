@@ -61,7 +61,7 @@ from parsim.core.ts.daha import DahaParameters, minimise
 from parsim.core.ts.domain import SerialDomain
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import Ghosts, build_problem
-from parsim.core.ts.quiet import Watch, steps_before_wall
+from parsim.core.ts.quiet import Watch, closing_speed, steps_before_wall
 from parsim.core.ts.tiles import (later_round_tiles_per_side, select_spheres, stopping_cells_per_side, tiles_of,
                                   tiles_per_side)
 
@@ -159,41 +159,43 @@ class _Run:
         self.work = 0.0
         self.horizon_steps = QUIET_HORIZON_STEPS[0]
         self.watch = None  # the pairs that can touch soon (a Watch), while it holds
-        self._fastest = None  # max |V|, once computed
+        self._closing = None  # the closing speed, once computed
 
     def advect(self, dt):
         """Step 1: free flight, then the whole-cluster wall reflection; returns the reflections made."""
-        flight = dt * self.fastest() if self.watch is not None else 0.0
+        flight = dt * self.closing() if self.watch is not None else 0.0  # at the velocities of the flight
         self.X += dt * self.V
         own_cluster = self.cluster[self.global_id]
         where, extent = wall_overruns(self.X, self.R, own_cluster, self.L)
         where, shift, sign = reflections(self.domain.gather(where), self.domain.gather(extent), self.L)
         apply_reflections(self.X, self.V, own_cluster, where, shift, sign)
+        if shift.size:  # turned velocities
+            self._closing = None
         self.global_id, self.X, self.V = self.domain.redistribute(self.global_id, self.X, self.V)
         self.R = self.R_all[self.global_id]
         jump = math.sqrt(self.d) * float(np.abs(shift).max()) if shift.size else 0.0  # a cluster's, at most
-        self._moved_apart(flight + jump)
+        self._closed_by(flight + 2.0 * jump)
         return where.shape[0]
 
     def coast(self, steps, dt):
         """``steps`` quiet steps of length ``dt`` in one advection (no contact, no reflection)."""
-        self._moved_apart(steps * dt * self.fastest())
+        self._closed_by(steps * dt * self.closing())
         self.X += (steps * dt) * self.V
 
-    def _moved_apart(self, distance):
-        """Every sphere moved at most ``distance`` (pairs closed at most twice that): shrink the
-        watch's slack, and drop the watch once it no longer holds."""
+    def _closed_by(self, gap):
+        """Every pair of spheres came at most ``gap`` closer: shrink the watch's slack, and drop
+        the watch once it no longer holds."""
         if self.watch is not None:
-            self.watch.close_by(2.0 * distance)
+            self.watch.close_by(gap)
             if not self.watch.valid:
                 self.watch = None
 
-    def fastest(self):
-        """``max |V_i|`` over all spheres; kept until a merge, as reflections only turn velocities."""
-        if self._fastest is None:
-            local = float(np.sqrt((self.V**2).sum(axis=1)).max()) if self.X.shape[0] else 0.0
-            self._fastest = self.domain.max(local)
-        return self._fastest
+    def closing(self):
+        """The closing speed (:func:`parsim.core.ts.quiet.closing_speed`), kept until the
+        velocities change (a merge or a reflection)."""
+        if self._closing is None:
+            self._closing = closing_speed(self.V, self.domain)
+        return self._closing
 
     def _with_ghosts(self, width):
         """Owned and ghost rows: ``(halo, global ids, positions)``, to be read, not written."""
@@ -208,25 +210,25 @@ class _Run:
         (a float bound); makes a watch if none holds."""
         quiet = self.domain.min(steps_before_wall(self.X, self.V, self.R, self.L, dt))
         if quiet > 0:
-            fastest = self.fastest()
-            if self.watch is None or self.watch.lasts(dt, fastest) < 2.0:  # no quiet step left: renew
-                self.watch = self._new_watch(dt, fastest)
+            closing = self.closing()
+            if self.watch is None or self.watch.lasts(dt, closing) < 2.0:  # no quiet step left: renew
+                self.watch = self._new_watch(dt, closing)
             halo, ids, X = self._with_ghosts(self.contact + max(self.watch.slack, 0.0))
             V = np.concatenate([self.V, halo.exchange(self.V)])
             quiet = min(quiet, self.domain.min(self.watch.quiet_steps(X, V, self.R_all[ids], self.cluster[ids], ids,
-                                                                      dt, fastest)))
+                                                                      dt, closing)))
             if not self.watch.valid:  # made with no slack: nothing moves, or no room for a halo
                 self.watch = None
         self.horizon_steps = min(2 * self.horizon_steps, QUIET_HORIZON_STEPS[1]) if quiet > 0 else QUIET_HORIZON_STEPS[0]
         return quiet
 
-    def _new_watch(self, dt, fastest):
+    def _new_watch(self, dt, closing):
         """A watch of the pairs within the gap the fastest pair closes in ``horizon_steps`` steps,
         or less (see the constants), searched from the spheres outside the largest cluster
         (every pair of different clusters has an end there)."""
         sizes = np.bincount(self.cluster, minlength=self.n_clusters)
         largest = sizes.argmax()
-        horizon = min(self.horizon_steps * 2.0 * fastest * dt, self.L / 4.0,
+        horizon = min(self.horizon_steps * closing * dt, self.L / 4.0,
                       self.domain.max_halo_width - self.contact, self._affordable_horizon(self.n - sizes[largest]))
         _, ids, X = self._with_ghosts(self.contact + horizon)
         cluster = self.cluster[ids]
@@ -294,14 +296,14 @@ class _Run:
         else:
             raise MinimiserFailure(f"time step {step} (t = {time:.6g}): the link set still changed after "
                                    f"{MAX_LINK_ROUNDS} rounds of minimisation (step 2e)")
-        self._moved_apart(drift)
+        self._closed_by(2.0 * drift)
         made = np.concatenate(made)
         labels, m = merge_clusters(self.cluster, self.n_clusters, made)
         merged = np.unique(labels[made[:, 0]])  # every merged cluster holds an end of a new link
         own_labels = labels[self.global_id]  # step 3, eq. 2.9
         sums = self.domain.sum_array(cluster_momenta(self.V, self.m_all[self.global_id], own_labels, merged))
         set_cluster_velocities(self.V, own_labels, merged, sums)
-        self._fastest = None
+        self._closing = None
         self.cluster, self.n_clusters = labels, m
         return True
 
