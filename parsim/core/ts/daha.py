@@ -141,7 +141,11 @@ in deeper overlaps never sleep: their multipliers are what drives (3.28) down, a
 them made a clump converge eight times slower.  A configuration where nothing moves is a
 fixed point of both iterations, the stopping conditions are tested on full sweeps only (but
 see polishing below), and every decision is local to a sphere and its partners, so the
-iteration still splits among tiles and ranks.
+iteration still splits among tiles and ranks.  While more than half the moving spheres are
+awake (the first hundred or so iterations of a large minimisation, three quarters of its
+sphere updates), the multipliers are updated and the wake-ups spread pair by pair rather
+than sphere by sphere: the same pairs and spheres, 13-15 % less time on replayed
+first-step minimisations at N = 102 400.
 
 Polishing (ours, with sleeping spheres).  Once a full sweep finds (3.27) and (3.28) met, the
 paper would stop; only our deepest-overlap bound may still fail.  From then on the full
