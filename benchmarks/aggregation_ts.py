@@ -10,13 +10,15 @@ N = 1600 and each V_f warms the kernels up first.
 Prints, per (method, V_f, N), the mean wall and CPU time over the realizations (CPU time
 is the better measure when other processes share the cores), time steps (TS) or events
 (ED), DAHA minimisations and iterations (TS), then the least-squares exponents of wall
-and CPU time vs N over N >= 1000 per (method, V_f), next to the paper's TS exponents.
+and CPU time vs N over N >= 1000 per (method, V_f), and the CPU exponent between the two
+largest N, next to the paper's TS exponents.
 Once a run of a (method, V_f) takes longer than --max-seconds, its larger N are skipped.
 
     python benchmarks/aggregation_ts.py [--sizes 100 400 1600] [--fractions 0.2] [--methods ts ed]
 """
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -115,7 +117,10 @@ def main(argv=None):
         paper = f"{paper:.2f}" if paper is not None else "-"
         if len(big) >= 2:
             wall, cpu = np.polyfit(np.log(list(big)), np.log(list(big.values())), 1)[0]
-            print(f"{method:>6} V_f = {vf:.2f}: wall {wall:.2f}, CPU {cpu:.2f}   (paper TS: {paper})")
+            (n1, (_, cpu1)), (n2, (_, cpu2)) = sorted(big.items())[-2:]
+            top = math.log(cpu2 / cpu1) / math.log(n2 / n1)  # where the curve is steepest
+            print(f"{method:>6} V_f = {vf:.2f}: wall {wall:.2f}, CPU {cpu:.2f}, CPU from N = {n1} to {n2}: "
+                  f"{top:.2f}   (paper TS: {paper})")
         else:
             print(f"{method:>6} V_f = {vf:.2f}: needs at least two sizes with N >= {FIT_MIN_N}   (paper TS: {paper})")
 
