@@ -64,14 +64,17 @@ def test_two_overlapping_discs_are_pushed_apart_to_contact():
     assert np.allclose(problem.positions.mean(axis=0), [1.15, 1.025], atol=1e-12)
 
 
+@pytest.mark.parametrize("params", [PARAMS, replace(PARAMS, dynamic=True)], ids=["constant", "eq_3_29"])
 @pytest.mark.parametrize("k", [8, 30, 200])
-def test_a_clump_of_overlapping_discs_converges(k):
+def test_a_clump_of_overlapping_discs_converges(k, params):
+    """Also with the dynamic damping and multiplier rate of (3.29), which give a disc deep in
+    an overlap a damping delta c_i far above 1 (clipped at daha.MAX_DAMPING)."""
     rng = np.random.default_rng(k)
     x = 5.0 + rng.uniform(0.0, 0.4 * math.sqrt(k), (k, 2))  # area fraction ~0.8: many overlaps
     gaps = all_gaps(x, np.full(k, R))
     assert (gaps <= 0).sum() >= k / 2
     problem, radii = problem_of(x, touching_links(x))
-    outcome = minimise(problem, PARAMS)
+    outcome = minimise(problem, params)
     assert outcome.converged, outcome
     assert outcome.mean_overlap <= PARAMS.overlap_tolerance  # eq. 3.28
     assert outcome.max_step <= PARAMS.steadiness_tolerance  # eq. 3.27
@@ -206,12 +209,12 @@ def paper_system(n, volume_fraction, seed):
             np.ones(n), length)
 
 
-@pytest.mark.parametrize("formulation, carry", [("almost_rigid", True), ("non_rigid", True),
-                                                ("almost_rigid", False)])
+@pytest.mark.parametrize("formulation, carry, dynamic", [("almost_rigid", True, False), ("non_rigid", True, False),
+                                                         ("almost_rigid", False, False), ("almost_rigid", True, True)])
 @pytest.mark.parametrize("volume_fraction", [0.1, 0.3])
-def test_aggregation_ends_in_one_cluster_without_overlap(formulation, carry, volume_fraction):
+def test_aggregation_ends_in_one_cluster_without_overlap(formulation, carry, dynamic, volume_fraction):
     x, v, radii, masses, length = paper_system(150, volume_fraction, seed=4)
-    daha = DahaParameters(carry_multipliers=carry)
+    daha = DahaParameters(carry_multipliers=carry, dynamic=dynamic)
     result = simulate_ts(x, v, radii, masses, length, formulation=formulation, daha=daha)
     assert result.stop_reason == "single_cluster"
     assert np.all(result.cluster == 0) and result.n_collisions == 149

@@ -20,7 +20,7 @@ consistent discretisation of (3.15) (drift, kick, damp, drift):
 
     X^{r+1/2} = X^r + (delta/2) U^r                                  (3.20)
     U^{r+1/2} = U^r + delta F(X^{r+1/2}, lambda^r)                   (3.21)
-    U^{r+1}   = (1 - delta c_i) U^{r+1/2}, delta c_i clipped to [0, 1] (3.22)
+    U^{r+1}   = (1 - delta c_i) U^{r+1/2}, delta c_i clipped to [0, MAX_DAMPING] (3.22)
     X^{r+1}   = X^{r+1/2} + (delta/2) U^{r+1}                        (3.23)
     lambda^{r+1} = max(0, lambda^r + delta beta phi(X^{r+1}))         (3.24)
 
@@ -76,7 +76,15 @@ measured as in (3.28), ``o_ij = sqrt(max(0, phi_ij))`` (a length).  The printed 
 ``c_i = c_bar |...| / phi_A`` can freeze a sphere at rest or leave one undamped; the
 ``1 +`` keeps ``c_i >= c_bar``.  Each multiplier's rate is capped at ``STABILITY_MARGIN``
 times the bound ``c gamma / (2 alpha)`` of its spheres.  The divisions are guarded:
-``phi_A`` below ``OVERLAP_FLOOR eps_c`` counts as "no overlap".
+``phi_A`` below ``OVERLAP_FLOOR eps_c`` counts as "no overlap".  The law still gives a sphere
+deep in an overlap, once the mean overlap ``phi_A`` is small, ``delta c_i`` far above 1; clipped
+at 1, (3.22) erased its velocity in every iteration and it never moved: every run at N >= 400
+failed in its first steps, with "last step 0" and a deepest overlap of 0.13-0.4.  Clipped at
+``MAX_DAMPING`` (0.9) it keeps a tenth of its velocity; clumps of 200 discs then converge and
+those runs reach one cluster.  With constant parameters ``delta c`` is 0.45 and the clip does
+nothing.  One caveat remains: the fast multipliers of (3.29) make two overlapping discs
+overshoot contact, and the iteration stops at a turning point of their oscillation with a gap
+of 0.009 (as with a constant ``beta = 30``, above); (3.27) looks at one iteration only.
 
 Stopping (3.27)–(3.28): every moving sphere moved at most ``eps_s`` in the last
 iteration and the mean overlap over the links, ``sum o_ij / #S``, is at most ``eps_c``.
@@ -195,6 +203,9 @@ OVERLAP_FLOOR = 1e-9
 STABILITY_MARGIN = 0.5
 #: A sphere's kick is scaled down when delta^2 times its stiffness exceeds this (module docstring).
 STIFFNESS_LIMIT = 2.0
+#: The damping of one iteration, delta c_i, is clipped here: at 1 a sphere's velocity would be
+#: erased in every iteration (module docstring, "Dynamic parameters").
+MAX_DAMPING = 0.9
 #: Once a moving sphere is this fraction of the candidate reach away from where its pairs were
 #: last searched, its pairs are searched again (contacts.updated_candidate_pairs needs <= 1/3) ...
 REFRESH_DRIFT = 1.0 / 3.0
@@ -299,7 +310,7 @@ def _drift(P, U, awake, h):
 @jit
 def _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_a, pair_b, lam,
                      sphere_overlap, mean_overlap, dynamic, delta, alpha, gamma, c_bar, attracts, out,
-                     damping_of, stiffness_limit):
+                     damping_of, stiffness_limit, max_damping):
     """Forces at the half step, eqs. (3.21)–(3.23); new positions of the awake spheres go to ``out``.
     A sphere whose stiffness ``K`` exceeds ``stiffness_limit / delta^2`` gets its kick scaled
     by ``stiffness_limit / (delta^2 K)`` (module docstring, "Stiff spheres")."""
@@ -337,7 +348,7 @@ def _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_
         else:
             c = c_bar
         damping_of[i] = c
-        damping = min(delta * c, 1.0)
+        damping = min(delta * c, max_damping)
         for k in range(d):
             U[i, k] *= 1.0 - damping
             out[i, k] = P[i, k] + 0.5 * delta * U[i, k]
@@ -525,7 +536,7 @@ def _settle(restless, U, is_awake, first_ghost, link_ptr, link_to, pair_ptr, pai
 @jit
 def _measure(phi, counted, link_ptr, pair_ptr, pair_of, sphere_overlap):
     """Overlap sum and count over the ``counted`` pairs (3.28), and the mean overlap per
-    moving sphere (``sphere_overlap``, filled in)."""
+    moving sphere (``sphere_overlap``, filled in; empty when not wanted)."""
     total = 0.0
     overlapping = 0
     for p in range(phi.shape[0]):
@@ -732,7 +743,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     if multipliers is not None:
         known = np.isfinite(multipliers)
         lam[known] = multipliers[known]
-    sphere_overlap = np.zeros(n_moving)
+    sphere_overlap = np.zeros(n_moving if params.dynamic else 0)  # phi_i^A of (3.29), for dynamic damping only
     previous = start.copy()
     previous_ghost = P[first_ghost:].copy()
     phi = np.empty(problem.pair_a.size)
@@ -790,7 +801,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
         _kick_damp_drift(P, U, R, awake, problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of,
                          problem.pair_a, problem.pair_b, lam, sphere_overlap, guarded, params.dynamic, delta,
                          params.attraction, params.penalty, params.damping, attracts, new, damping_of,
-                         STIFFNESS_LIMIT)
+                         STIFFNESS_LIMIT, MAX_DAMPING)
         _copy_rows(P, new, awake)  # accept the new positions
         exchange.share(P)
         if params.dynamic:
