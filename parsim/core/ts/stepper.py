@@ -91,8 +91,13 @@ MAX_LINK_ROUNDS = 1000
 #: each quiet stretch found, up to the most, back to the least after a look-ahead found none) ...
 QUIET_HORIZON_STEPS = (8, 1024)
 #: ... and at most the gap at which a search from the spheres outside the largest cluster
-#: examines about this many pairs per sphere of the run (the cost of a few contact searches).
+#: examines about this many pairs per sphere of the run (the cost of a few contact searches) ...
 QUIET_PAIRS_PER_SPHERE = 64.0
+#: ... and at most this fraction of the box.  With few spheres outside the largest cluster the
+#: pairs within the horizon cost more than the renewal's sort of every sphere once the horizon
+#: is long: in a late stage of 250 000 steps at N = 102 400 (two small clusters wandering)
+#: the run took 70 s with L/8, 75 s with L/16 and 77 s with L/4; other runs alike.
+QUIET_HORIZON_BOX_FRACTION = 1.0 / 8.0
 
 
 class MinimiserFailure(RuntimeError):
@@ -228,7 +233,7 @@ class _Run:
         (every pair of different clusters has an end there)."""
         sizes = np.bincount(self.cluster, minlength=self.n_clusters)
         largest = sizes.argmax()
-        horizon = min(self.horizon_steps * closing * dt, self.L / 4.0,
+        horizon = min(self.horizon_steps * closing * dt, QUIET_HORIZON_BOX_FRACTION * self.L,
                       self.domain.max_halo_width - self.contact, self._affordable_horizon(self.n - sizes[largest]))
         _, ids, X = self._with_ghosts(self.contact + horizon)
         cluster = self.cluster[ids]
