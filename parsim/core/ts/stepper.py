@@ -242,7 +242,7 @@ class _Run:
         pairs = cross_cluster_pairs(X, self.R_all[ids], cluster, queries, horizon, side, k)
         # every pair has an owned end (a query); a watch needs neither order nor uniqueness, which
         # _shared_pairs would buy with a sort (29 ms for the 1.4 million pairs of a late-stage
-        # watch at N = 102 400)
+        # watch at N = 102 400 when the horizon reached L/4)
         return Watch(self.domain.gather(ids[pairs]), horizon)
 
     def _affordable_horizon(self, n_queries):
