@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from parsim.core.celllist import grid_size
-from parsim.core.ts.contacts import BinnedRows, candidate_pairs, incidence, unlinked_contacts, updated_candidate_pairs
+from parsim.core.ts.contacts import (BinnedRows, candidate_pairs, cross_cluster_pairs, incidence, unlinked_contacts,
+                                    updated_candidate_pairs)
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.daha import REFRESH_DRIFT, REFRESH_SET
 
@@ -14,6 +15,28 @@ def brute_force_pairs(X, R, n_moving, gap):
     distance = np.linalg.norm(X[:, None] - X[None], axis=2) - (R[:, None] + R[None])
     a, b = np.nonzero(np.triu(distance <= gap, k=1))
     return {(i, j) for i, j in zip(a.tolist(), b.tolist()) if i < n_moving}
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("query_fraction", [1.0, 0.6, 0.1])
+def test_pairs_of_different_clusters_within_reach_are_found_each_once(d, query_fraction):
+    """With most spheres as queries the cells are swept pair by pair, otherwise searched around
+    each query: either way every pair of different clusters within reach with a query end comes
+    out once, the query first (the smaller row if both are); a few spheres lie outside the grid."""
+    rng = np.random.default_rng(30 + d)
+    n, L, reach = 400, 6.0 if d == 2 else 3.0, 0.3
+    X = rng.uniform(-0.2, L + 0.2, (n, d))
+    R = rng.uniform(0.1, 0.2, n)
+    cluster = rng.integers(0, 150, n)
+    queries = np.sort(rng.choice(n, int(query_fraction * n), replace=False))
+    k, side = grid_size(L, 2 * R.max() + reach, d, n)
+    found = cross_cluster_pairs(X, R, cluster, queries, reach, side, k)
+    is_query = np.isin(np.arange(n), queries)
+    expected = {(i, j) for i, j in brute_force_pairs(X, R, n, reach) if cluster[i] != cluster[j]
+                and (is_query[i] or is_query[j])}
+    assert len(expected) > 20
+    as_found = [(i, j) if is_query[i] and is_query[j] else (j, i) if is_query[j] else (i, j) for i, j in expected]
+    assert sorted(map(tuple, found.tolist())) == sorted(as_found)
 
 
 @pytest.mark.parametrize("d", [2, 3])

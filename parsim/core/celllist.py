@@ -19,6 +19,7 @@ from parsim.core.jit import jit
 __all__ = [
     "grid_size",
     "neighbour_offsets",
+    "forward_offsets",
     "cell_index",
     "build_cells",
     "move_to_cell",
@@ -56,6 +57,21 @@ def neighbour_offsets(dimension):
             out[o, a] = q % 3 - 1
             q //= 3
     return out
+
+
+@jit
+def forward_offsets(dimension):
+    """The ``(3^d - 1) / 2`` offsets of :func:`neighbour_offsets` whose last non-zero component
+    is +1: of two distinct cells of a block, exactly one is a forward neighbour of the other, so
+    a sweep over the cells visiting each cell and its forward neighbours sees every pair once."""
+    offsets = neighbour_offsets(dimension)
+    forward = np.zeros(offsets.shape[0], dtype=np.bool_)
+    for o in range(offsets.shape[0]):
+        for a in range(dimension - 1, -1, -1):
+            if offsets[o, a] != 0:
+                forward[o] = offsets[o, a] > 0
+                break
+    return offsets[forward]
 
 
 @jit
