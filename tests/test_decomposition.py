@@ -52,7 +52,7 @@ def test_tiles_follow_the_cell_rule_of_the_solver():
     points[:7, 0] = np.arange(7) * 3.0 / 7  # exactly on tile edges
     tiles = decomposition.tile_indices(points)
     linear = tiles @ (7 ** np.arange(3))
-    assert linear.tolist() == [cell_index(x, 3.0 / 7, 7) for x in points]
+    assert linear.tolist() == [cell_index(points, i, 3.0 / 7, 7) for i in range(len(points))]
 
 
 def test_block_of_tiles_puts_a_boundary_tile_in_the_upper_block():

@@ -308,7 +308,7 @@ def _bin(k, x, Xb, grid):
     k_side, side, offsets, cell_head, cell_next, cell_prev, cell_of, cell_count, coords, block = grid
     for a in range(Xb.shape[1]):
         Xb[k, a] = x[a]
-    move_to_cell(k, cell_index(x, side, k_side), cell_head, cell_next, cell_prev, cell_of, cell_count)
+    move_to_cell(k, cell_index(Xb, k, side, k_side), cell_head, cell_next, cell_prev, cell_of, cell_count)
 
 
 @jit

@@ -44,7 +44,7 @@ def _sorted_by_cell(X, side, k):
     first = np.zeros(k ** X.shape[1] + 1, dtype=np.int32)
     cell_of = np.empty(n, dtype=np.int32)
     for i in range(n):
-        cell_of[i] = cell_index(X[i], side, k)
+        cell_of[i] = cell_index(X, i, side, k)
         first[cell_of[i] + 1] += 1
     for c in range(first.shape[0] - 1):
         first[c + 1] += first[c]
@@ -210,12 +210,12 @@ def _rows_near(X, rows, side, k):
     coords = np.empty(d, dtype=np.int64)
     block = np.empty(offsets.shape[0], dtype=np.int64)
     for i in rows:
-        for b in range(block_cells(cell_index(X[i], side, k), k, offsets, coords, block)):
+        for b in range(block_cells(cell_index(X, i, side, k), k, offsets, coords, block)):
             marked[block[b]] = True
     near = np.empty(n, dtype=np.int64)
     count = 0
     for j in range(n):
-        if marked[cell_index(X[j], side, k)]:
+        if marked[cell_index(X, j, side, k)]:
             near[count] = j
             count += 1
     return near[:count]
@@ -287,13 +287,13 @@ def _binned_pairs(X, R, lower, queries, reach, side, k, head, nxt, prv, cell_of,
     """Rebin the ``queries`` at ``X`` and return the pairs ``(i, j)``, ``i`` a query, with a gap
     of at most ``reach``; a pair of two queries once."""
     n, d = X.shape
-    shifted = np.empty(d)
+    shifted = np.empty((1, d))
     is_query = np.zeros(n, dtype=np.bool_)
     for i in queries:
         is_query[i] = True
         for a in range(d):
-            shifted[a] = X[i, a] - lower[a]
-        move_to_cell(i, cell_index(shifted, side, k), head, nxt, prv, cell_of, count)
+            shifted[0, a] = X[i, a] - lower[a]
+        move_to_cell(i, cell_index(shifted, 0, side, k), head, nxt, prv, cell_of, count)
     offsets = neighbour_offsets(d)
     coords = np.empty(d, dtype=np.int64)
     block = np.empty(offsets.shape[0], dtype=np.int64)

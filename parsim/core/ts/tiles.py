@@ -71,7 +71,7 @@ def _per_side(box_length, width):
 def _tile_indices(X, rows, side, k):
     tile = np.empty(rows.shape[0], dtype=np.int64)
     for r in range(rows.shape[0]):
-        tile[r] = cell_index(X[rows[r]], side, k)
+        tile[r] = cell_index(X, rows[r], side, k)
     return tile
 
 
@@ -81,7 +81,7 @@ def _select(X, involved, active, side, k):
     n, d = X.shape
     tile = np.empty(n, dtype=np.int64)
     for i in range(n):
-        tile[i] = cell_index(X[i], side, k) if involved[i] else -1
+        tile[i] = cell_index(X, i, side, k) if involved[i] else -1
     state = np.zeros(k**d, dtype=np.int8)  # 2 active (inner), 1 outer
     for t in active:
         state[t] = 2
