@@ -182,8 +182,14 @@ def cross_cluster_pairs(X, R, cluster, queries, reach, side, k):
     most ``reach`` (a pair of two queries once, ``i < j``), shape ``(m, 2)``.
 
     The grid (``k`` cells per side of length ``side >= 2 max R + reach``) covers the box.
+    With queries in less than half the rows, only the rows near them are sorted
+    (:func:`_pairs_near`): in a late stage at N = 102 400, where the watch is renewed from
+    fewer than 100 spheres outside the largest cluster 2 486 times, the run took 59.5 s
+    instead of 62.3 s.
     """
-    return _near_pairs(X, R, queries, cluster, reach, side, k)
+    if 2 * queries.shape[0] >= X.shape[0]:
+        return _near_pairs(X, R, queries, cluster, reach, side, k)
+    return _pairs_near(X, R, queries, cluster, reach, side, k)
 
 
 @jit
@@ -230,13 +236,19 @@ def unlinked_contacts(X, R, moved, side, k, global_id, link_head, link_next, lin
     Only the rows near the moved ones are sorted, into cells over their bounding box: after a
     minimisation of a few clusters that is a small part of the box (at N = 102 400 the search
     over the whole box cost 11 ms a round, 6.5 ms over the near rows in the whole box's cells)."""
-    near = _rows_near(X, moved, side, k)
-    if near.size < 2:  # a rank may hold no moved sphere
-        return np.empty((0, 2), dtype=np.int64)
-    queries = np.searchsorted(near, moved)
-    lower, near_k, near_side = _bounding_grid(X[near], side)
-    touching = near[_near_pairs(X[near] - lower, R[near], queries, np.arange(near.size), 0.0, near_side, near_k)]
+    touching = _pairs_near(X, R, moved, np.arange(X.shape[0]), 0.0, side, k)
     return _unlinked(touching, global_id, link_head, link_next, link_to)
+
+
+def _pairs_near(X, R, queries, group, reach, side, k):
+    """The pairs of :func:`_near_pairs` (``queries`` ascending) from the rows within one cell
+    of a query alone, sorted into cells over their bounding box."""
+    near = _rows_near(X, queries, side, k)
+    if near.size < 2:  # a rank may hold no query
+        return np.empty((0, 2), dtype=np.int64)
+    lower, near_k, near_side = _bounding_grid(X[near], side)
+    return near[_near_pairs(X[near] - lower, R[near], np.searchsorted(near, queries), group[near], reach, near_side,
+                            near_k)]
 
 
 def _bounding_grid(P, cutoff):
