@@ -1,5 +1,5 @@
-"""Cluster bookkeeping of the time-stepping method: wall reflection (section 3, item ii),
-relabelling from the links and the mass-weighted velocity (step 3, eq. 2.9).
+"""Cluster bookkeeping of the time-stepping method: free flight and wall reflection (section 3,
+items i and ii), relabelling from the links and the mass-weighted velocity (step 3, eq. 2.9).
 
 The kernels read only the spheres they are given, so that a decomposed run calls them on
 each rank's spheres and combines the small results (overruns, momentum sums) over ranks.
@@ -11,6 +11,14 @@ the spheres (the numbering of the event-driven solver).
 import numpy as np
 
 from parsim.core.jit import jit
+
+
+@jit
+def free_flight(X, V, duration):
+    """Step 1: ``X += duration V``, in place (numpy's temporary cost more than the update)."""
+    for i in range(X.shape[0]):
+        for a in range(X.shape[1]):
+            X[i, a] += duration * V[i, a]
 
 
 @jit

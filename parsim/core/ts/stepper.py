@@ -54,7 +54,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from parsim.core.celllist import grid_size
-from parsim.core.ts.clusters import (apply_reflections, cluster_momenta, involved_spheres, merge_clusters,
+from parsim.core.ts.clusters import (apply_reflections, cluster_momenta, free_flight, involved_spheres, merge_clusters,
                                      reflections, set_cluster_velocities, wall_overruns)
 from parsim.core.ts.contacts import cross_cluster_contacts, cross_cluster_pairs, unlinked_contacts
 from parsim.core.ts.daha import DahaParameters, minimise
@@ -157,6 +157,7 @@ class _Run:
         self.max_displacement = MAX_DISPLACEMENT * float(R.max())
         self.global_id, self.X, self.V = domain.distribute(X, V, self._problem_width(0.0))
         self.R = R[self.global_id]
+        self.own_cluster = self.cluster[self.global_id]  # the cluster labels of the owned rows
         self.local_of = np.full(n, -1, dtype=np.int64)
         self.n_minimisations = 0
         self.n_iterations = 0
@@ -169,15 +170,15 @@ class _Run:
     def advect(self, dt):
         """Step 1: free flight, then the whole-cluster wall reflection; returns the reflections made."""
         flight = dt * self.closing() if self.watch is not None else 0.0  # at the velocities of the flight
-        self.X += dt * self.V
-        own_cluster = self.cluster[self.global_id]
-        where, extent = wall_overruns(self.X, self.R, own_cluster, self.L)
+        free_flight(self.X, self.V, dt)
+        where, extent = wall_overruns(self.X, self.R, self.own_cluster, self.L)
         where, shift, sign = reflections(self.domain.gather(where), self.domain.gather(extent), self.L)
-        apply_reflections(self.X, self.V, own_cluster, where, shift, sign)
-        if shift.size:  # turned velocities
-            self._closing = None
-        self.global_id, self.X, self.V = self.domain.redistribute(self.global_id, self.X, self.V)
-        self.R = self.R_all[self.global_id]
+        if shift.size:
+            apply_reflections(self.X, self.V, self.own_cluster, where, shift, sign)
+            self._closing = None  # turned velocities
+        global_id, self.X, self.V = self.domain.redistribute(self.global_id, self.X, self.V)
+        if global_id is not self.global_id:  # rows migrated (one process keeps its rows)
+            self.global_id, self.R, self.own_cluster = global_id, self.R_all[global_id], self.cluster[global_id]
         jump = math.sqrt(self.d) * float(np.abs(shift).max()) if shift.size else 0.0  # a cluster's, at most
         self._closed_by(flight + 2.0 * jump)
         return where.shape[0]
@@ -185,7 +186,7 @@ class _Run:
     def coast(self, steps, dt):
         """``steps`` quiet steps of length ``dt`` in one advection (no contact, no reflection)."""
         self._closed_by(steps * dt * self.closing())
-        self.X += (steps * dt) * self.V
+        free_flight(self.X, self.V, steps * dt)
 
     def _closed_by(self, gap):
         """Every pair of spheres came at most ``gap`` closer: shrink the watch's slack, and drop
@@ -203,12 +204,13 @@ class _Run:
         return self._closing
 
     def _with_ghosts(self, width):
-        """Owned and ghost rows: ``(halo, global ids, positions)``, to be read, not written."""
+        """Owned and ghost rows, to be read, not written: ``(halo, global ids, positions, radii,
+        cluster labels)``."""
         halo = self.domain.ghosts(self.X, self.global_id, width)
-        if self.domain.size == 1:  # no ghosts: spare the copies (0.2 ms at N = 102 400)
-            return halo, self.global_id, self.X
+        if self.domain.size == 1:  # no ghosts: spare the copies and gathers (0.3 ms at N = 102 400)
+            return halo, self.global_id, self.X, self.R, self.own_cluster
         ids = np.concatenate([self.global_id, halo.ghost_global_id])
-        return halo, ids, np.concatenate([self.X, halo.exchange(self.X)])
+        return halo, ids, np.concatenate([self.X, halo.exchange(self.X)]), self.R_all[ids], self.cluster[ids]
 
     def quiet_steps(self, dt):
         """How many of the next steps of length ``dt`` certainly make no link and no reflection
@@ -218,10 +220,9 @@ class _Run:
             closing = self.closing()
             if self.watch is None or self.watch.lasts(dt, closing) < 2.0:  # no quiet step left: renew
                 self.watch = self._new_watch(dt, closing)
-            halo, ids, X = self._with_ghosts(self.contact + max(self.watch.slack, 0.0))
-            V = np.concatenate([self.V, halo.exchange(self.V)])
-            quiet = min(quiet, self.domain.min(self.watch.quiet_steps(X, V, self.R_all[ids], self.cluster[ids], ids,
-                                                                      dt, closing)))
+            halo, ids, X, R, cluster = self._with_ghosts(self.contact + max(self.watch.slack, 0.0))
+            V = self.V if self.domain.size == 1 else np.concatenate([self.V, halo.exchange(self.V)])
+            quiet = min(quiet, self.domain.min(self.watch.quiet_steps(X, V, R, cluster, ids, dt, closing)))
             if not self.watch.valid:  # made with no slack: nothing moves, or no room for a halo
                 self.watch = None
         self.horizon_steps = min(2 * self.horizon_steps, QUIET_HORIZON_STEPS[1]) if quiet > 0 else QUIET_HORIZON_STEPS[0]
@@ -235,11 +236,10 @@ class _Run:
         largest = sizes.argmax()
         horizon = min(self.horizon_steps * closing * dt, QUIET_HORIZON_BOX_FRACTION * self.L,
                       self.domain.max_halo_width - self.contact, self._affordable_horizon(self.n - sizes[largest]))
-        _, ids, X = self._with_ghosts(self.contact + horizon)
-        cluster = self.cluster[ids]
+        _, ids, X, R, cluster = self._with_ghosts(self.contact + horizon)
         k, side = grid_size(self.L, self.contact + horizon, self.d, self.n, CONTACT_CELLS_PER_SPHERE)
         queries = np.flatnonzero(cluster[: self.X.shape[0]] != largest)
-        pairs = cross_cluster_pairs(X, self.R_all[ids], cluster, queries, horizon, side, k)
+        pairs = cross_cluster_pairs(X, R, cluster, queries, horizon, side, k)
         # every pair has an owned end (a query); a watch needs neither order nor uniqueness, which
         # _shared_pairs would buy with a sort (29 ms for the 1.4 million pairs of a late-stage
         # watch at N = 102 400 when the horizon reached L/4)
@@ -275,12 +275,12 @@ class _Run:
     def interact(self, step, time):
         """Step 2: link, minimise, link what the minimisation made touch, until nothing new.
         Returns whether any link was made."""
-        _, ids, X = self._with_ghosts(self.contact)
+        _, ids, X, R, cluster = self._with_ghosts(self.contact)
         n_owned = self.X.shape[0]
         if self.watch is not None:
-            touching = self.watch.contacts(X, self.R_all[ids], self.cluster[ids], ids)
+            touching = self.watch.contacts(X, R, cluster, ids)
         else:
-            touching = cross_cluster_contacts(X, self.R_all[ids], self.cluster[ids], self.grid_side, self.grid_k)
+            touching = cross_cluster_contacts(X, R, cluster, self.grid_side, self.grid_k)
         new = self._shared_pairs(touching, ids, n_owned)
         if new.shape[0] == 0:
             return False
@@ -291,8 +291,8 @@ class _Run:
         for _ in range(MAX_LINK_ROUNDS):
             moving = self._minimise(np.concatenate(made), made[-1], step, time, drift)
             drift = max(drift, self._drift(start, moving))  # only the moving rows have moved
-            _, ids, X = self._with_ghosts(self.contact + drift)
-            touching = unlinked_contacts(X, self.R_all[ids], moving, self.grid_side, self.grid_k, ids,
+            _, ids, X, R, _ = self._with_ghosts(self.contact + drift)
+            touching = unlinked_contacts(X, R, moving, self.grid_side, self.grid_k, ids,
                                          self.links.head, self.links.next, self.links.to)
             fresh = self._shared_pairs(touching, ids, n_owned)
             if fresh.shape[0] == 0 or self.links.add(fresh[:, 0], fresh[:, 1], step) == 0:
@@ -309,7 +309,7 @@ class _Run:
         sums = self.domain.sum_array(cluster_momenta(self.V, self.m_all[self.global_id], own_labels, merged))
         set_cluster_velocities(self.V, own_labels, merged, sums)
         self._closing = None
-        self.cluster, self.n_clusters = labels, m
+        self.cluster, self.n_clusters, self.own_cluster = labels, m, own_labels
         return True
 
     def _minimise(self, made, latest, step, time, drift):
