@@ -10,6 +10,7 @@ import xarray as xr
 from parsim.comparison import markdown, method_comparison
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
 from parsim.core.ts import DahaParameters, daha, simulate_ts, stepper, tiles
+from parsim.core.ts.clusters import apply_reflections, free_flight, reflections
 from parsim.core.ts.contacts import cross_cluster_contacts
 from parsim.core.ts.daha import FULL_SWEEP_EVERY, attraction_energy, minimise
 from parsim.core.ts.links import LinkSet
@@ -226,6 +227,24 @@ def test_aggregation_ends_in_one_cluster_without_overlap(formulation, carry, dyn
     assert np.abs(link_gaps).max() < 0.1 * R
     # one cluster: one velocity, the total momentum up to the reflections' sign changes
     assert np.allclose(result.velocities, result.velocities[0], atol=0, rtol=0)
+
+
+def test_a_cluster_past_a_wall_is_mirrored_back_as_a_whole():
+    """Item (ii): after the free flight a cluster with a sphere past a wall is mirrored across it
+    as a whole, that sphere as far inside as it was outside, its normal velocity turned inwards;
+    the other clusters fly on."""
+    X = np.array([[9.5, 5.0], [9.0, 5.0], [5.0, 5.0], [0.6, 2.0]])
+    V = np.array([[1.0, 0.5], [1.0, 0.5], [1.0, 0.0], [-1.0, 0.0]])
+    R = np.full(4, 0.25)
+    cluster = np.array([0, 0, 1, 2])  # discs 0 and 1 form one cluster
+    where, extent = free_flight(X, V, R, cluster, 10.0, 0.5)
+    assert where.tolist() == [[0, 0], [2, 0]]  # disc 0 reaches 10.25, disc 3 -0.15
+    where, shift, sign = reflections(where, extent, 10.0)
+    apply_reflections(X, V, cluster, where, shift, sign)
+    assert np.allclose(X, [[9.5, 5.25], [9.0, 5.25], [5.5, 5.0], [0.4, 2.0]], rtol=0, atol=1e-12)
+    assert V.tolist() == [[-1.0, 0.5], [-1.0, 0.5], [1.0, 0.0], [1.0, 0.0]]
+    where, _ = free_flight(np.full((9, 2), 9.5), np.ones((9, 2)), np.ones(9), np.arange(9), 10.0, 0.25)
+    assert where.tolist() == [[i, a] for i in range(9) for a in range(2)]  # every disc past two walls
 
 
 def test_merges_conserve_momentum_away_from_walls():

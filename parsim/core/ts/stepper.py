@@ -55,7 +55,7 @@ import numpy as np
 
 from parsim.core.celllist import grid_size
 from parsim.core.ts.clusters import (apply_reflections, cluster_momenta, free_flight, involved_spheres, merge_clusters,
-                                     reflections, set_cluster_velocities, wall_overruns)
+                                     reflections, set_cluster_velocities)
 from parsim.core.ts.contacts import cross_cluster_contacts, cross_cluster_pairs, unlinked_contacts
 from parsim.core.ts.daha import DahaParameters, minimise
 from parsim.core.ts.domain import SerialDomain
@@ -170,8 +170,7 @@ class _Run:
     def advect(self, dt):
         """Step 1: free flight, then the whole-cluster wall reflection; returns the reflections made."""
         flight = dt * self.closing() if self.watch is not None else 0.0  # at the velocities of the flight
-        free_flight(self.X, self.V, dt)
-        where, extent = wall_overruns(self.X, self.R, self.own_cluster, self.L)
+        where, extent = free_flight(self.X, self.V, self.R, self.own_cluster, self.L, dt)
         where, shift, sign = reflections(self.domain.gather(where), self.domain.gather(extent), self.L)
         if shift.size:
             apply_reflections(self.X, self.V, self.own_cluster, where, shift, sign)
@@ -186,7 +185,7 @@ class _Run:
     def coast(self, steps, dt):
         """``steps`` quiet steps of length ``dt`` in one advection (no contact, no reflection)."""
         self._closed_by(steps * dt * self.closing())
-        free_flight(self.X, self.V, steps * dt)
+        free_flight(self.X, self.V, self.R, self.own_cluster, self.L, steps * dt)  # reaches no wall
 
     def _closed_by(self, gap):
         """Every pair of spheres came at most ``gap`` closer: shrink the watch's slack, and drop
