@@ -66,7 +66,7 @@ def _near_pairs(X, R, queries, group, reach, side, k):
     The rows are copied cell by cell, so that the spheres a search examines lie next to each
     other in memory: in row order, which the motion of the clusters scrambles, a search over
     102 400 scattered spheres took 45 ms instead of 22 ms.  When at least half the rows are
-    queries the cells are swept, each pair of rows examined once (8.6 ms instead of 15 ms for
+    queries the cells are swept, each pair of rows examined once (8 ms instead of 15 ms for
     that search); otherwise each query examines the block of cells around its own.
     """
     n, d = X.shape
