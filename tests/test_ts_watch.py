@@ -96,3 +96,22 @@ def test_one_fast_cluster_among_still_ones_closes_at_its_own_speed():
     """The late stage: a small cluster at speed 1, two at rest."""
     V = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
     assert closing_speed(V, SerialDomain()) == pytest.approx(1.0)
+
+
+def test_listed_pairs_limit_the_quiet_steps_only_on_a_collision_course():
+    """Two discs head-on (contact after 4.5 time units) end the quiet stretch after 4 steps;
+    two passing each other 1.5 apart (not touching, though closing at the same speed) do
+    not limit it, and the slack alone does."""
+    R = np.full(2, 0.5)
+    cluster = np.array([0, 1])
+    ids = np.arange(2)
+    head_on = np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([[1.0, 0.0], [-1.0, 0.0]])
+    passing = np.array([[0.0, 0.0], [10.0, 1.5]]), np.array([[1.0, 0.0], [-1.0, 0.0]])
+    quiet = []
+    for X, V in (head_on, passing):
+        watch = Watch(np.array([[0, 1]]), 40.0)
+        quiet.append(watch.quiet_steps(X, V, R, cluster, ids, 1.0, closing=2.0))
+        assert watch.lasts(1.0, 2.0) == 19
+    assert quiet == [4, 18]
+    X, V = head_on
+    assert not cross_contacts(X + 4.0 * V, R, cluster) and cross_contacts(X + 5.0 * V, R, cluster)
