@@ -115,11 +115,11 @@ class Watch:
     ``slack`` runs out; see the module docstring.  Every process holds all of them, in any
     order; a pair found from both ends (on two processes) may be listed twice."""
 
-    def __init__(self, pairs, horizon):
+    def __init__(self, pairs, horizon, held=None, rows=None):
         self.pairs = pairs
         self.slack = horizon
-        self._held = None  # the ids of the rows the pairs were last mapped to ...
-        self._rows_of_pairs = None  # ... and that mapping
+        self._held = held  # the ids of the rows the pairs were last mapped to ...
+        self._rows_of_pairs = rows  # ... and that mapping (known when the pairs were found here alone)
 
     def close_by(self, distance):
         """Account for every pair having come up to ``distance`` closer."""
@@ -133,7 +133,7 @@ class Watch:
         """The pairs as rows of the spheres ``ids`` held here, -1 for a sphere not held; kept
         while the same spheres are held in the same rows (mapping 1.4 million pairs took 1 ms,
         and a late stage asks several times per watch)."""
-        if self._held is None or not np.array_equal(self._held, ids):
+        if self._held is not ids and (self._held is None or not np.array_equal(self._held, ids)):
             local_of = np.full(int(max(self.pairs.max(initial=-1), ids.max(initial=-1))) + 1, -1, dtype=np.int64)
             local_of[ids] = np.arange(ids.size)
             self._held, self._rows_of_pairs = ids.copy(), local_of[self.pairs]

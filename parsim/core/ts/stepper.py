@@ -23,7 +23,10 @@ Quiet steps.  After a time step that made no link, the stepper lists the pairs o
 that can touch soon (a watch, :mod:`parsim.core.ts.quiet`), bounds how many of the next steps
 can make no contact and no wall reflection, and advances them with one advection, skipping
 contact searches that would find nothing.  While the watch holds, it also answers the
-contact search of each time step, and the look-aheads after it.
+contact search of each time step, and the look-aheads after it.  Once the largest cluster holds
+more than half the spheres, a watch is searched from the spheres outside it, the largest
+cluster's own being kept binned in its moving frame until the next merge
+(:mod:`parsim.core.ts.frame`).
 
 Formulations.  ``"non_rigid"`` (section 3.1): every sphere of the interacting clusters
 moves and every link attracts (eq. 3.5).  ``"almost_rigid"`` (section 3.3): only the
@@ -59,6 +62,7 @@ from parsim.core.ts.clusters import (apply_reflections, cluster_momenta, free_fl
 from parsim.core.ts.contacts import cross_cluster_contacts, cross_cluster_pairs, unlinked_contacts
 from parsim.core.ts.daha import DahaParameters, minimise
 from parsim.core.ts.domain import SerialDomain
+from parsim.core.ts.frame import ClusterFrame
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import Ghosts, build_problem
 from parsim.core.ts.quiet import Watch, closing_speed, steps_before_wall
@@ -129,6 +133,34 @@ def check_formulation(formulation):
         raise ValueError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
 
 
+class _LargestCluster:
+    """The largest cluster (``label``, ``size`` spheres) and the owned rows ``outside`` it, for
+    the labels ``cluster`` and the owned spheres ``global_id`` it was made for; and, once asked
+    for, its owned rows in their own frame (:class:`parsim.core.ts.frame.ClusterFrame`)."""
+
+    def __init__(self, cluster, n_clusters, global_id, own_cluster):
+        sizes = np.bincount(cluster, minlength=n_clusters)
+        self.label = int(sizes.argmax())
+        self.size = int(sizes[self.label])
+        inside = own_cluster == self.label
+        self.outside = np.flatnonzero(~inside)
+        self._inside = np.flatnonzero(inside)
+        self._made_for = (cluster, global_id)
+        self._frame = None
+
+    def holds(self, cluster, global_id):
+        """Whether these are still the labels and owned spheres it was made for (merges and
+        migrations make new arrays)."""
+        return self._made_for[0] is cluster and self._made_for[1] is global_id
+
+    def frame(self, X, R, cutoff, box_length):
+        """The owned rows of the cluster in its frame, in cells at least ``cutoff`` wide (binned
+        again when the cells are too narrow or more than twice too wide)."""
+        if self._frame is None or not cutoff <= self._frame.cutoff <= 2.0 * cutoff:
+            self._frame = ClusterFrame(X, R, self._inside, cutoff, box_length)
+        return self._frame
+
+
 class _Run:
     """The state of one run and the three steps of section 3.
 
@@ -165,6 +197,7 @@ class _Run:
         self.work = 0.0
         self.horizon_steps = QUIET_HORIZON_STEPS[0]
         self.watch = None  # the pairs that can touch soon (a Watch), while it holds
+        self._largest = _LargestCluster(self.cluster, self.n_clusters, self.global_id, self.own_cluster)
         self._closing = None  # the closing speed, once computed
 
     def advect(self, dt):
@@ -194,6 +227,13 @@ class _Run:
             self.watch.close_by(gap)
             if not self.watch.valid:
                 self.watch = None
+
+    def _largest_cluster(self):
+        """The largest cluster and the owned rows outside it (:class:`_LargestCluster`), kept
+        until a merge or a migration."""
+        if not self._largest.holds(self.cluster, self.global_id):
+            self._largest = _LargestCluster(self.cluster, self.n_clusters, self.global_id, self.own_cluster)
+        return self._largest
 
     def closing(self):
         """The closing speed (:func:`parsim.core.ts.quiet.closing_speed`), kept until the
@@ -231,18 +271,36 @@ class _Run:
         """A watch of the pairs within the gap the fastest pair closes in ``horizon_steps`` steps,
         or less (see the constants), searched from the spheres outside the largest cluster
         (every pair of different clusters has an end there)."""
-        sizes = np.bincount(self.cluster, minlength=self.n_clusters)
-        largest = sizes.argmax()
+        largest = self._largest_cluster()
         horizon = min(self.horizon_steps * closing * dt, QUIET_HORIZON_BOX_FRACTION * self.L,
-                      self.domain.max_halo_width - self.contact, self._affordable_horizon(self.n - sizes[largest]))
+                      self.domain.max_halo_width - self.contact, self._affordable_horizon(self.n - largest.size))
         _, ids, X, R, cluster = self._with_ghosts(self.contact + horizon)
-        k, side = grid_size(self.L, self.contact + horizon, self.d, self.n, CONTACT_CELLS_PER_SPHERE)
-        queries = np.flatnonzero(cluster[: self.X.shape[0]] != largest)
-        pairs = cross_cluster_pairs(X, R, cluster, queries, horizon, side, k)
+        n_owned = self.X.shape[0]
+        if 2 * (self.n - largest.size) < self.n:  # (on every process alike) search in the largest one's frame
+            pairs = self._pairs_outside(largest, X, R, cluster, n_owned, horizon)
+        else:
+            k, side = grid_size(self.L, self.contact + horizon, self.d, self.n, CONTACT_CELLS_PER_SPHERE)
+            pairs = cross_cluster_pairs(X, R, cluster, largest.outside, horizon, side, k)
         # every pair has an owned end (a query); a watch needs neither order nor uniqueness, which
         # _shared_pairs would buy with a sort (29 ms for the 1.4 million pairs of a late-stage
         # watch at N = 102 400 when the horizon reached L/4)
+        if self.domain.size == 1:  # the pairs' rows are known: spare the watch mapping them back (O(N))
+            return Watch(ids[pairs], horizon, held=ids, rows=pairs)
         return Watch(self.domain.gather(ids[pairs]), horizon)
+
+    def _pairs_outside(self, largest, X, R, cluster, n_owned, horizon):
+        """The pairs of spheres of different clusters with a gap of at most ``horizon`` and an
+        end outside the largest cluster, ``largest`` searched in its own frame: each process
+        reports those with an owned end in the largest cluster, and those between two other
+        spheres with an owned end."""
+        queries = np.concatenate([largest.outside, n_owned + np.flatnonzero(cluster[n_owned:] != largest.label)])
+        frame = largest.frame(self.X, self.R, self.contact + horizon, self.L)
+        with_largest = frame.pairs_near(X, R, queries, horizon)
+        k, side = grid_size(self.L, self.contact + horizon, self.d, max(queries.size, 1), CONTACT_CELLS_PER_SPHERE)
+        among = queries[cross_cluster_pairs(X[queries], R[queries], cluster[queries], np.arange(queries.size),
+                                            horizon, side, k)]
+        among = among[(among < n_owned).any(axis=1)]
+        return np.concatenate([with_largest, among])
 
     def _affordable_horizon(self, n_queries):
         """The largest horizon at which the quiet-step search from ``n_queries`` spheres looks at

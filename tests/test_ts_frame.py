@@ -1,0 +1,41 @@
+"""A cluster binned in its own frame (parsim.core.ts.frame), checked against brute force."""
+
+import numpy as np
+import pytest
+
+from parsim.core.ts.frame import ClusterFrame
+
+
+def near_pairs(X, R, queries, rows, reach):
+    """Pairs (q, j), q in queries, j in rows, with a gap of at most reach, by brute force."""
+    gap = np.linalg.norm(X[queries][:, None] - X[rows][None], axis=2) - (R[queries][:, None] + R[rows][None])
+    a, b = np.nonzero(gap <= reach)
+    return set(zip(queries[a].tolist(), rows[b].tolist()))
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_a_translated_cluster_is_found_in_its_frame(seed, dimension):
+    """A large cluster binned once, then flown for 50 steps, shifted as by a wall reflection
+    and flown again, gives the pairs with the spheres outside it that brute force gives."""
+    rng = np.random.default_rng(seed)
+    box, n = 12.0, 600
+    X = rng.uniform(0.0, box, (n, dimension))
+    R = rng.uniform(0.15, 0.25, n)
+    inside = np.flatnonzero(rng.random(n) < 0.9)
+    outside = np.setdiff1d(np.arange(n), inside)
+    reach = 1.3
+    frame = ClusterFrame(X, R, inside, 2.0 * R.max() + reach, box)
+    velocity = rng.normal(0.0, 1.0, dimension)
+    for _ in range(50):
+        X[inside] += 0.013 * velocity
+        X[outside] += 0.013 * rng.normal(0.0, 5.0, (outside.size, dimension))
+    X[inside, 0] += 0.37  # a reflection: the cluster shifted as a whole
+    X[inside] += 0.2 * velocity
+    found = frame.pairs_near(X, R, outside, reach)
+    expected = near_pairs(X, R, outside, inside, reach)
+    assert len(expected) > 100
+    assert set(map(tuple, found.tolist())) == expected
+    assert found.shape[0] == len(expected)  # each pair once
+    assert near_pairs(X, R, outside, inside, 0.5 * reach) == set(map(tuple, frame.pairs_near(X, R, outside,
+                                                                                             0.5 * reach).tolist()))
