@@ -7,7 +7,7 @@ import pytest
 from parsim.core.celllist import grid_size
 from parsim.core.ts.contacts import cross_cluster_pairs
 from parsim.core.ts.domain import SerialDomain
-from parsim.core.ts.quiet import Watch, closing_speed
+from parsim.core.ts.quiet import Watch, closing_speed, outermost, steps_before_wall
 
 
 def cross_contacts(X, R, cluster):
@@ -115,3 +115,25 @@ def test_listed_pairs_limit_the_quiet_steps_only_on_a_collision_course():
     assert quiet == [4, 18]
     X, V = head_on
     assert not cross_contacts(X + 4.0 * V, R, cluster) and cross_contacts(X + 5.0 * V, R, cluster)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_translating_cluster_reaches_a_wall_first_with_an_outermost_sphere(seed):
+    """One cluster of 500 discs flying at one velocity through a box of side 40: its outermost
+    discs, picked once, bound the steps before a wall exactly as all its discs do, at every
+    step of its flight, for any velocity."""
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(15.0, 25.0, (500, 2))
+    R = rng.uniform(0.1, 0.3, 500)
+    rows = np.arange(500)
+    outer = outermost(X, R, rows, 1e-6 * 40.0)
+    assert 4 <= outer.size < 20
+    for velocity in rng.normal(0.0, 1.0, (5, 2)):
+        V = np.broadcast_to(velocity, X.shape).copy()
+        Y = X.copy()
+        while True:
+            every = steps_before_wall(Y, V, R, 40.0, 0.07, rows)
+            assert steps_before_wall(Y, V, R, 40.0, 0.07, outer) == every
+            if every == 0:
+                break
+            Y += 0.07 * V

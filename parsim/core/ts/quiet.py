@@ -195,14 +195,25 @@ def closing_speed(V, domain):
 
 
 @jit
-def steps_before_wall(X, V, R, box_length, dt):
-    """Steps during which no sphere gets outside ``[0, L]^d`` (no reflection).  Sphere by
-    sphere: the minimum over a cluster's spheres is the cluster's bound."""
+def steps_before_wall(X, V, R, box_length, dt, rows):
+    """Steps during which none of the spheres ``rows`` gets outside ``[0, L]^d`` (no
+    reflection).  Sphere by sphere: the minimum over a cluster's spheres is the cluster's
+    bound."""
     steps = math.inf
-    for i in range(X.shape[0]):
+    for i in rows:
         for a in range(X.shape[1]):
             if V[i, a] < 0.0:
                 steps = min(steps, _steps_before(X[i, a] - R[i], -V[i, a] * dt))
             elif V[i, a] > 0.0:
                 steps = min(steps, _steps_before(box_length - (X[i, a] + R[i]), V[i, a] * dt))
     return steps
+
+
+def outermost(X, R, rows, tolerance):
+    """The ``rows`` within ``tolerance`` of the lowest ``X - R`` or the highest ``X + R`` along
+    some axis: the spheres that reach a wall first when the rows translate together (for any
+    velocity), should round-off shuffle spheres nearly level."""
+    low, high = X[rows] - R[rows, None], X[rows] + R[rows, None]
+    outer = ((low <= low.min(axis=0, initial=np.inf) + tolerance)
+             | (high >= high.max(axis=0, initial=-np.inf) - tolerance)).any(axis=1)
+    return rows[outer]

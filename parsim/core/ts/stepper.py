@@ -65,7 +65,7 @@ from parsim.core.ts.domain import SerialDomain
 from parsim.core.ts.frame import ClusterFrame
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import Ghosts, build_problem
-from parsim.core.ts.quiet import Watch, closing_speed, steps_before_wall
+from parsim.core.ts.quiet import Watch, closing_speed, outermost, steps_before_wall
 from parsim.core.ts.tiles import (later_round_tiles_per_side, select_spheres, stopping_cells_per_side, tiles_of,
                                   tiles_per_side)
 
@@ -102,6 +102,11 @@ QUIET_PAIRS_PER_SPHERE = 64.0
 #: is long: in a late stage of 250 000 steps at N = 102 400 (two small clusters wandering)
 #: the run took 70 s with L/8, 75 s with L/16 and 77 s with L/4; other runs alike.
 QUIET_HORIZON_BOX_FRACTION = 1.0 / 8.0
+
+
+#: Spheres of one cluster whose distances to a wall differ by less than this (times L) count as
+#: level when the run looks for the cluster's outermost spheres.
+WALL_TIE = 1e-6
 
 
 class MinimiserFailure(RuntimeError):
@@ -147,11 +152,20 @@ class _LargestCluster:
         self._inside = np.flatnonzero(inside)
         self._made_for = (cluster, global_id)
         self._frame = None
+        self._outermost = None
 
     def holds(self, cluster, global_id):
         """Whether these are still the labels and owned spheres it was made for (merges and
         migrations make new arrays)."""
         return self._made_for[0] is cluster and self._made_for[1] is global_id
+
+    def wall_rows(self, X, R, box_length):
+        """The owned rows that can reach a wall first: those outside the cluster and its
+        outermost ones (:func:`parsim.core.ts.quiet.outermost`; the cluster translates rigidly,
+        and its spheres drift apart by round-off only, far below ``WALL_TIE`` L)."""
+        if self._outermost is None:
+            self._outermost = np.concatenate([self.outside, outermost(X, R, self._inside, WALL_TIE * box_length)])
+        return self._outermost
 
     def frame(self, X, R, cutoff, box_length):
         """The owned rows of the cluster in its frame, in cells at least ``cutoff`` wide (binned
@@ -254,7 +268,8 @@ class _Run:
     def quiet_steps(self, dt):
         """How many of the next steps of length ``dt`` certainly make no link and no reflection
         (a float bound); makes a watch if none holds."""
-        quiet = self.domain.min(steps_before_wall(self.X, self.V, self.R, self.L, dt))
+        wall_rows = self._largest_cluster().wall_rows(self.X, self.R, self.L)
+        quiet = self.domain.min(steps_before_wall(self.X, self.V, self.R, self.L, dt, wall_rows))
         if quiet > 0:
             closing = self.closing()
             if self.watch is None or self.watch.lasts(dt, closing) < 2.0:  # no quiet step left: renew
