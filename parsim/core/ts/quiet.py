@@ -209,11 +209,24 @@ def steps_before_wall(X, V, R, box_length, dt, rows):
     return steps
 
 
+@jit
 def outermost(X, R, rows, tolerance):
     """The ``rows`` within ``tolerance`` of the lowest ``X - R`` or the highest ``X + R`` along
     some axis: the spheres that reach a wall first when the rows translate together (for any
     velocity), should round-off shuffle spheres nearly level."""
-    low, high = X[rows] - R[rows, None], X[rows] + R[rows, None]
-    outer = ((low <= low.min(axis=0, initial=np.inf) + tolerance)
-             | (high >= high.max(axis=0, initial=-np.inf) - tolerance)).any(axis=1)
-    return rows[outer]
+    d = X.shape[1]
+    lowest = np.full(d, np.inf)
+    highest = np.full(d, -np.inf)
+    for i in rows:
+        for a in range(d):
+            lowest[a] = min(lowest[a], X[i, a] - R[i])
+            highest[a] = max(highest[a], X[i, a] + R[i])
+    outer = np.empty(rows.shape[0], dtype=rows.dtype)
+    count = 0
+    for i in rows:
+        for a in range(d):
+            if X[i, a] - R[i] <= lowest[a] + tolerance or X[i, a] + R[i] >= highest[a] - tolerance:
+                outer[count] = i
+                count += 1
+                break
+    return outer[:count].copy()
