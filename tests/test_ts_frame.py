@@ -17,7 +17,8 @@ def near_pairs(X, R, queries, rows, reach):
 @pytest.mark.parametrize("dimension", [2, 3])
 def test_a_translated_cluster_is_found_in_its_frame(seed, dimension):
     """A large cluster binned once, then flown for 50 steps, shifted as by a wall reflection
-    and flown again, gives the pairs with the spheres outside it that brute force gives."""
+    and flown again, gives the pairs with the spheres outside it that brute force gives, for
+    the gap its cells were sized for and for others."""
     rng = np.random.default_rng(seed)
     box, n = 12.0, 600
     X = rng.uniform(0.0, box, (n, dimension))
@@ -37,5 +38,6 @@ def test_a_translated_cluster_is_found_in_its_frame(seed, dimension):
     assert len(expected) > 100
     assert set(map(tuple, found.tolist())) == expected
     assert found.shape[0] == len(expected)  # each pair once
-    assert near_pairs(X, R, outside, inside, 0.5 * reach) == set(map(tuple, frame.pairs_near(X, R, outside,
-                                                                                             0.5 * reach).tolist()))
+    for other in (0.5 * reach, 2.5 * reach):  # the cells are sized for reach, but any gap is searched right
+        assert set(map(tuple, frame.pairs_near(X, R, outside, other).tolist())) == near_pairs(X, R, outside, inside,
+                                                                                              other)

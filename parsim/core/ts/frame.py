@@ -35,16 +35,14 @@ CELLS_PER_SPHERE = 4
 
 
 @jit
-def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R, first, side, k):
+def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R, largest, first, side, k):
     """Pairs ``(q, j)``, ``q`` in ``queries``, ``j`` in ``binned_rows`` (sorted cell by cell,
-    those of cell ``c`` being ``binned_rows[first[c]:first[c + 1]]``, binned at ``binned_X``),
-    with a gap ``|X_q - X_j| - R_q - R_j <= reach``; the cells are looked up at ``X_q - shift``.
-    The frame's positions select the candidates, within a padded distance; the pairs are
-    decided on ``X``, by the test of the whole-box searches."""
+    those of cell ``c`` being ``binned_rows[first[c]:first[c + 1]]``, binned at ``binned_X``,
+    radii ``binned_R`` of at most ``largest``), with a gap ``|X_q - X_j| - R_q - R_j <= reach``.
+    Each query scans the cells within its search distance of ``X_q - shift``; the frame's
+    positions select the candidates, within a padded distance, and the pairs are decided on
+    ``X``, by the test of the whole-box searches."""
     d = X.shape[1]
-    largest = 0.0
-    for s in range(binned_R.shape[0]):
-        largest = max(largest, binned_R[s])
     low = np.empty(d, dtype=np.int64)
     span = np.empty(d, dtype=np.int64)
     coords = np.empty(d, dtype=np.int64)
@@ -89,8 +87,9 @@ def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R
 
 class ClusterFrame:
     """The rows ``rows`` of ``X`` (one cluster's spheres, radii ``R``), binned where they are
-    now for searches up to ``cutoff`` (``2 max R`` plus the gap searched), over the box
-    ``[0, box_length]^d``.
+    now over the box ``[0, box_length]^d``, in cells sized for searches up to ``cutoff``
+    (``2 max R`` plus the gap searched; a search of any gap is right, one of about that gap
+    fast).
 
     Valid while the rows move together by translations; the caller renews it after a merge
     or when rows change places.
@@ -106,12 +105,13 @@ class ClusterFrame:
         self._binned_rows = rows[order]
         self._binned_X = X[self._binned_rows]
         self._binned_R = R[self._binned_rows]
+        self._largest = float(self._binned_R.max(initial=0.0))
 
     def pairs_near(self, X, R, queries, reach):
         """Pairs ``(q, j)`` of rows, ``q`` in ``queries``, ``j`` in the frame, with a gap of at
-        most ``reach``; ``2 max R + reach`` must be at most the frame's ``cutoff``."""
+        most ``reach`` (``X``: the rows' positions now, ``R``: their radii)."""
         if self.rows.size == 0:
             return np.empty((0, 2), dtype=np.int64)
         shift = X[self.rows[0]] - self._origin[0]
         return _pairs_in_frame(X, R, queries, reach, shift, self._binned_rows, self._binned_X, self._binned_R,
-                               self._first, self.side, self.k)
+                               self._largest, self._first, self.side, self.k)

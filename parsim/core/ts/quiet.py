@@ -15,10 +15,11 @@ slack is positive:
 - a time step's contacts are among the listed pairs: the whole-box search is not needed;
 - over ``j`` steps of constant ``dt`` every sphere flies straight: a listed pair touches first
   at the smaller root of a quadratic, if at all (a pair moving apart, or passing by, never
-  does), and an unlisted one approaches by at most ``j dt w``; a cluster whose bounding box is
-  inside the box reaches a wall after a number of steps read off its velocity.  The stepper advances all the steps before the first possible contact or
-  reflection with one advection: the steps still happen (time, histories, the dt law),
-  only the searches that would have found nothing are skipped.
+  does), and an unlisted one approaches by at most ``j dt w``; a cluster inside the box
+  reaches a wall, with one of its outermost spheres, after a number of steps read off its
+  velocity.  The stepper advances all the steps before the first possible contact or
+  reflection with one advection: the steps still happen (time, histories, the dt law), only
+  the searches that would have found nothing are skipped.
 
 A look-ahead makes a new watch when the current one would not last two more steps, and it
 leaves one step of slack, so that the watch also answers the search of the step that ends a
