@@ -155,9 +155,11 @@ class _LargestCluster:
         self._outermost = None
 
     def holds(self, cluster, global_id):
-        """Whether these are still the labels and owned spheres it was made for (merges and
-        migrations make new arrays)."""
-        return self._made_for[0] is cluster and self._made_for[1] is global_id
+        """Whether these are still the labels and owned spheres it was made for: merges make new
+        labels; a migration makes new rows, which hold the same spheres in the same order (by
+        global id) unless spheres came or went."""
+        made_for = self._made_for[1]
+        return self._made_for[0] is cluster and (made_for is global_id or np.array_equal(made_for, global_id))
 
     def wall_rows(self, X, R, box_length):
         """The owned rows that can reach a wall first: those outside the cluster and its
