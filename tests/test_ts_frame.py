@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from parsim.core.ts.frame import ClusterFrame
+from parsim.core.ts.quiet import time_to_contact
 
 
 def near_pairs(X, R, queries, rows, reach):
@@ -41,3 +42,32 @@ def test_a_translated_cluster_is_found_in_its_frame(seed, dimension):
     for other in (0.5 * reach, 2.5 * reach):  # the cells are sized for reach, but any gap is searched right
         assert set(map(tuple, frame.pairs_near(X, R, outside, other).tolist())) == near_pairs(X, R, outside, inside,
                                                                                               other)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_the_first_contact_along_straight_paths_is_found_in_the_frame(seed, dimension):
+    """A few spheres fly through a large cluster, itself flying and shifted since it was binned:
+    the earliest contact the frame finds is the earliest over every pair (brute force), or
+    none before the time looked at if there is none."""
+    rng = np.random.default_rng(seed)
+    box, n = 12.0, 600
+    X = rng.uniform(0.0, box, (n, dimension))
+    R = rng.uniform(0.15, 0.25, n)
+    inside = np.flatnonzero(rng.random(n) < 0.97)
+    outside = np.setdiff1d(np.arange(n), inside)
+    frame = ClusterFrame(X, R, inside, 2.0 * R.max() + 1.0, box)
+    V = rng.normal(0.0, 1.0, (n, dimension))
+    V[inside] = rng.normal(0.0, 0.3, dimension)
+    X[inside] += 0.37 * V[inside] + 0.2  # flown and shifted as a whole
+    for q in outside:  # each in a free spot: no contact at the start
+        while True:
+            X[q] = rng.uniform(0.0, box, dimension)
+            if (np.linalg.norm(X[inside] - X[q], axis=1) > R[inside] + R[q] + 0.05).all():
+                break
+    times = np.array([time_to_contact(X, V, R, q, j) for q in outside for j in inside])
+    first = times.min()
+    assert 0.0 < first < 1.0 and np.isinf(times).sum() > times.size / 2  # most pairs never meet
+    for duration in (0.5 * first, 2.0 * first, 5.0):
+        found = frame.first_contact(X, V, R, outside, duration)
+        assert found == first if first <= duration else found > duration

@@ -20,6 +20,7 @@ import numpy as np
 from parsim.core.celllist import grid_size
 from parsim.core.jit import jit
 from parsim.core.ts.contacts import _distance_sq, _sorted_by_cell, _with_pair
+from parsim.core.ts.quiet import time_to_contact
 
 #: The search looks this much farther, relatively: the spheres' positions are rounded at
 #: every flight, so the frame's shift matches each sphere's own only to within round-off.
@@ -85,6 +86,73 @@ def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R
     return pairs[:count].copy()
 
 
+@jit
+def _segment_distance_sq(P, s, a, b):
+    """Squared distance from row ``s`` of ``P`` to the segment from ``a`` to ``b``."""
+    d = P.shape[1]
+    along = norm = 0.0
+    for k in range(d):
+        along += (P[s, k] - a[k]) * (b[k] - a[k])
+        norm += (b[k] - a[k]) ** 2
+    f = min(max(along / norm, 0.0), 1.0) if norm > 0.0 else 0.0
+    distance_sq = 0.0
+    for k in range(d):
+        distance_sq += (P[s, k] - a[k] - f * (b[k] - a[k])) ** 2
+    return distance_sq
+
+
+@jit
+def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned_rows, binned_X, binned_R, largest,
+                            first, side, k):
+    """The earliest time within ``duration`` at which a query, flying straight at ``V_q``,
+    touches a binned row, all of which fly at the velocity of row ``reference``; ``inf`` if none
+    does.  Each query's path in the frame is cut into pieces at most a cell long, and the cells
+    around each piece are scanned: a row the path touches lies within ``R_q + R_j`` of it.  The
+    frame's positions select the candidates, the times come from ``X`` and ``V``
+    (:func:`parsim.core.ts.quiet.time_to_contact`)."""
+    d = X.shape[1]
+    low = np.empty(d, dtype=np.int64)
+    span = np.empty(d, dtype=np.int64)
+    coords = np.empty(d, dtype=np.int64)
+    start = np.empty(d)
+    end = np.empty(d)
+    earliest = math.inf
+    for q in queries:
+        length = 0.0
+        for a in range(d):
+            length += (V[q, a] - V[reference, a]) ** 2
+        length = math.sqrt(length) * duration
+        pieces = max(1, int(math.ceil(length / side)))
+        reach = (R[q] + largest) * (1.0 + ROUNDING_PAD)
+        for piece in range(pieces):
+            n_cells = 1
+            for a in range(d):
+                u = V[q, a] - V[reference, a]
+                start[a] = X[q, a] - shift[a] + u * duration * piece / pieces
+                end[a] = X[q, a] - shift[a] + u * duration * (piece + 1) / pieces
+                low[a] = min(max(int(math.floor((min(start[a], end[a]) - reach) / side)), 0), k - 1)
+                span[a] = min(max(int(math.floor((max(start[a], end[a]) + reach) / side)), 0), k - 1) - low[a] + 1
+                coords[a] = 0
+                n_cells *= span[a]
+            for _ in range(n_cells):
+                c = 0
+                stride = 1
+                for a in range(d):
+                    c += (low[a] + coords[a]) * stride
+                    stride *= k
+                for s in range(first[c], first[c + 1]):
+                    padded = (R[q] + binned_R[s]) * (1.0 + ROUNDING_PAD)
+                    if _segment_distance_sq(binned_X, s, start, end) <= padded * padded:
+                        earliest = min(earliest, time_to_contact(X, V, R, q, binned_rows[s]))
+                a = 0
+                coords[0] += 1
+                while a < d - 1 and coords[a] == span[a]:
+                    coords[a] = 0
+                    a += 1
+                    coords[a] += 1
+    return earliest
+
+
 class ClusterFrame:
     """The rows ``rows`` of ``X`` (one cluster's spheres, radii ``R``), binned where they are
     now over the box ``[0, box_length]^d``, in cells sized for searches up to ``cutoff``
@@ -112,6 +180,18 @@ class ClusterFrame:
         most ``reach`` (``X``: the rows' positions now, ``R``: their radii)."""
         if self.rows.size == 0:
             return np.empty((0, 2), dtype=np.int64)
-        shift = X[self.rows[0]] - self._origin[0]
-        return _pairs_in_frame(X, R, queries, reach, shift, self._binned_rows, self._binned_X, self._binned_R,
+        return _pairs_in_frame(X, R, queries, reach, self._shift(X), self._binned_rows, self._binned_X, self._binned_R,
                                self._largest, self._first, self.side, self.k)
+
+    def first_contact(self, X, V, R, queries, duration):
+        """The earliest time within ``duration`` at which one of the rows ``queries`` touches a
+        row of the frame, every row flying straight (the frame's rows at one velocity); ``inf``
+        if none does."""
+        if self.rows.size == 0:
+            return math.inf
+        return _first_contact_in_frame(X, V, R, queries, duration, self.rows[0], self._shift(X), self._binned_rows,
+                                       self._binned_X, self._binned_R, self._largest, self._first, self.side, self.k)
+
+    def _shift(self, X):
+        """How far the frame's rows have moved since they were binned."""
+        return X[self.rows[0]] - self._origin[0]

@@ -47,7 +47,7 @@ MARGIN = 1e-9
 
 
 @jit
-def _steps_before(distance, closing):
+def steps_before(distance, closing):
     """Largest ``j >= 0`` with ``j closing < distance`` (less the margin); ``closing >= 0``."""
     if distance <= 0.0:
         return 0.0
@@ -57,7 +57,7 @@ def _steps_before(distance, closing):
 
 
 @jit
-def _time_to_contact(X, V, R, i, j):
+def time_to_contact(X, V, R, i, j):
     """When spheres ``i`` and ``j``, flying straight, first touch: the smaller root of
     ``|dx + t dv| = R_i + R_j`` (``dx = X_i - X_j``, ``dv = V_i - V_j``), 0 if they touch now,
     ``inf`` if never.  Conservative: the distance is shrunk by ``MARGIN |dx|^2``, which keeps the
@@ -82,16 +82,29 @@ def _time_to_contact(X, V, R, i, j):
 @jit
 def _steps_before_touching(X, V, R, cluster, rows, dt):
     """Steps of length ``dt`` during which none of the pairs of ``rows`` (``-1``: not held here)
-    of different clusters can touch, each pair on its straight path (:func:`_time_to_contact`)."""
+    of different clusters can touch, each pair on its straight path (:func:`time_to_contact`)."""
     steps = math.inf
     for p in range(rows.shape[0]):
         i, j = rows[p, 0], rows[p, 1]
         if i < 0 or j < 0 or cluster[i] == cluster[j]:
             continue
-        time = _time_to_contact(X, V, R, i, j)
+        time = time_to_contact(X, V, R, i, j)
         if time < math.inf:
-            steps = min(steps, _steps_before(time, dt))
+            steps = min(steps, steps_before(time, dt))
     return steps
+
+
+@jit
+def first_contact_among(X, V, R, cluster, rows):
+    """The earliest time at which two of the spheres ``rows``, of different clusters and flying
+    straight, touch (:func:`time_to_contact`); ``inf`` if none do."""
+    earliest = math.inf
+    for p in range(rows.shape[0]):
+        for q in range(p + 1, rows.shape[0]):
+            i, j = rows[p], rows[q]
+            if cluster[i] != cluster[j]:
+                earliest = min(earliest, time_to_contact(X, V, R, i, j))
+    return earliest
 
 
 @jit
@@ -148,7 +161,7 @@ class Watch:
     def lasts(self, dt, closing):
         """How many steps of length ``dt`` the watch certainly holds (``closing``: the closing
         speed, :func:`closing_speed`)."""
-        return _steps_before(self.slack, closing * dt)
+        return steps_before(self.slack, closing * dt)
 
     def quiet_steps(self, X, V, R, cluster, ids, dt, closing):
         """How many steps of length ``dt`` certainly make no contact, if ``X`` holds every sphere
@@ -204,9 +217,9 @@ def steps_before_wall(X, V, R, box_length, dt, rows):
     for i in rows:
         for a in range(X.shape[1]):
             if V[i, a] < 0.0:
-                steps = min(steps, _steps_before(X[i, a] - R[i], -V[i, a] * dt))
+                steps = min(steps, steps_before(X[i, a] - R[i], -V[i, a] * dt))
             elif V[i, a] > 0.0:
-                steps = min(steps, _steps_before(box_length - (X[i, a] + R[i]), V[i, a] * dt))
+                steps = min(steps, steps_before(box_length - (X[i, a] + R[i]), V[i, a] * dt))
     return steps
 
 

@@ -65,7 +65,8 @@ from parsim.core.ts.domain import SerialDomain
 from parsim.core.ts.frame import ClusterFrame
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import Ghosts, build_problem
-from parsim.core.ts.quiet import Watch, closing_speed, outermost, steps_before_wall
+from parsim.core.ts.quiet import (Watch, closing_speed, first_contact_among, outermost, steps_before,
+                                  steps_before_wall)
 from parsim.core.ts.tiles import (later_round_tiles_per_side, select_spheres, stopping_cells_per_side, tiles_of,
                                   tiles_per_side)
 
@@ -103,6 +104,10 @@ QUIET_PAIRS_PER_SPHERE = 64.0
 #: the run took 70 s with L/8, 75 s with L/16 and 77 s with L/4; other runs alike.
 QUIET_HORIZON_BOX_FRACTION = 1.0 / 8.0
 
+
+#: With at most this many spheres outside the largest cluster (and on one process), the
+#: look-aheads follow their straight paths through its frame instead of keeping a watch.
+PATH_QUERIES = 1024
 
 #: Spheres of one cluster whose distances to a wall differ by less than this (times L) count as
 #: level when the run looks for the cluster's outermost spheres.
@@ -270,8 +275,12 @@ class _Run:
     def quiet_steps(self, dt):
         """How many of the next steps of length ``dt`` certainly make no link and no reflection
         (a float bound); makes a watch if none holds."""
-        wall_rows = self._largest_cluster().wall_rows(self.X, self.R, self.L)
+        largest = self._largest_cluster()
+        wall_rows = largest.wall_rows(self.X, self.R, self.L)
         quiet = self.domain.min(steps_before_wall(self.X, self.V, self.R, self.L, dt, wall_rows))
+        if 0 < quiet < math.inf and self._follows_paths(largest):
+            self.watch = None
+            return min(quiet, self._steps_before_contact(largest, (quiet + 1.0) * dt, dt))
         if quiet > 0:
             closing = self.closing()
             if self.watch is None or self.watch.lasts(dt, closing) < 2.0:  # no quiet step left: renew
@@ -284,6 +293,25 @@ class _Run:
         self.horizon_steps = min(2 * self.horizon_steps, QUIET_HORIZON_STEPS[1]) if quiet > 0 else QUIET_HORIZON_STEPS[0]
         return quiet
 
+    def _follows_paths(self, largest):
+        """Whether the look-aheads follow the paths of the few spheres outside the largest
+        cluster through its frame, with no watch (one process, at most ``PATH_QUERIES`` of them)."""
+        return self.domain.size == 1 and 2 * (self.n - largest.size) < self.n and largest.outside.size <= PATH_QUERIES
+
+    def _steps_before_contact(self, largest, duration, dt):
+        """Steps of length ``dt`` before any two spheres of different clusters, flying straight,
+        can touch, looked at over ``duration``: the paths of the spheres outside the largest
+        cluster through its frame, and every pair of them."""
+        frame = largest.frame(self.X, self.R, self._frame_cutoff(), self.L)
+        first = min(frame.first_contact(self.X, self.V, self.R, largest.outside, duration),
+                    first_contact_among(self.X, self.V, self.R, self.own_cluster, largest.outside))
+        return steps_before(first, dt) if first < math.inf else math.inf
+
+    def _frame_cutoff(self):
+        """The search distance the largest cluster's frame is binned for: that of the longest
+        watch."""
+        return self.contact + QUIET_HORIZON_BOX_FRACTION * self.L
+
     def _new_watch(self, dt, closing):
         """A watch of the pairs within the gap the fastest pair closes in ``horizon_steps`` steps,
         or less (see the constants), searched from the spheres outside the largest cluster
@@ -294,7 +322,7 @@ class _Run:
         _, ids, X, R, cluster = self._with_ghosts(self.contact + horizon)
         n_owned = self.X.shape[0]
         if 2 * (self.n - largest.size) < self.n:  # (on every process alike) search in the largest one's frame
-            pairs = self._pairs_outside(largest, X, R, cluster, n_owned, horizon)
+            pairs = self._pairs_outside(largest, X, R, cluster, n_owned, horizon, self.contact + horizon)
         else:
             k, side = grid_size(self.L, self.contact + horizon, self.d, self.n, CONTACT_CELLS_PER_SPHERE)
             pairs = cross_cluster_pairs(X, R, cluster, largest.outside, horizon, side, k)
@@ -305,13 +333,13 @@ class _Run:
             return Watch(ids[pairs], horizon, held=ids, rows=pairs)
         return Watch(self.domain.gather(ids[pairs]), horizon)
 
-    def _pairs_outside(self, largest, X, R, cluster, n_owned, horizon):
+    def _pairs_outside(self, largest, X, R, cluster, n_owned, horizon, cells_for):
         """The pairs of spheres of different clusters with a gap of at most ``horizon`` and an
-        end outside the largest cluster, ``largest`` searched in its own frame: each process
-        reports those with an owned end in the largest cluster, and those between two other
-        spheres with an owned end."""
+        end outside the largest cluster, ``largest`` searched in its own frame (binned for
+        searches up to ``cells_for``): each process reports those with an owned end in the
+        largest cluster, and those between two other spheres with an owned end."""
         queries = np.concatenate([largest.outside, n_owned + np.flatnonzero(cluster[n_owned:] != largest.label)])
-        frame = largest.frame(self.X, self.R, self.contact + horizon, self.L)
+        frame = largest.frame(self.X, self.R, cells_for, self.L)
         with_largest = frame.pairs_near(X, R, queries, horizon)
         k, side = grid_size(self.L, self.contact + horizon, self.d, max(queries.size, 1), CONTACT_CELLS_PER_SPHERE)
         among = queries[cross_cluster_pairs(X[queries], R[queries], cluster[queries], np.arange(queries.size),
@@ -353,6 +381,8 @@ class _Run:
         n_owned = self.X.shape[0]
         if self.watch is not None:
             touching = self.watch.contacts(X, R, cluster, ids)
+        elif self._follows_paths(self._largest_cluster()):
+            touching = self._pairs_outside(self._largest_cluster(), X, R, cluster, n_owned, 0.0, self._frame_cutoff())
         else:
             touching = cross_cluster_contacts(X, R, cluster, self.grid_side, self.grid_k)
         new = self._shared_pairs(touching, ids, n_owned)
