@@ -26,7 +26,10 @@ contact searches that would find nothing.  While the watch holds, it also answer
 contact search of each time step, and the look-aheads after it.  Once the largest cluster holds
 more than half the spheres, a watch is searched from the spheres outside it, the largest
 cluster's own being kept binned in its moving frame until the next merge
-(:mod:`parsim.core.ts.frame`).
+(:mod:`parsim.core.ts.frame`).  With few spheres outside it (``PATH_QUERIES``) and on one
+process, a look-ahead keeps no watch: it follows their straight paths through that frame to
+the first possible contact, up to the next wall reflection, and the step after a quiet
+stretch finds its contacts in the frame.
 
 Formulations.  ``"non_rigid"`` (section 3.1): every sphere of the interacting clusters
 moves and every link attracts (eq. 3.5).  ``"almost_rigid"`` (section 3.3): only the
@@ -274,7 +277,8 @@ class _Run:
 
     def quiet_steps(self, dt):
         """How many of the next steps of length ``dt`` certainly make no link and no reflection
-        (a float bound); makes a watch if none holds."""
+        (a float bound): from the paths of the few spheres outside the largest cluster
+        (:meth:`_steps_before_contact`), or else from a watch, made if none holds."""
         largest = self._largest_cluster()
         wall_rows = largest.wall_rows(self.X, self.R, self.L)
         quiet = self.domain.min(steps_before_wall(self.X, self.V, self.R, self.L, dt, wall_rows))
