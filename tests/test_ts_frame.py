@@ -7,6 +7,18 @@ from parsim.core.ts.frame import ClusterFrame
 from parsim.core.ts.quiet import time_to_contact
 
 
+BOX = 12.0
+
+
+def spheres_and_cluster(rng, dimension, fraction):
+    """600 spheres at random in the box; about ``fraction`` of them (``inside``) a cluster, the
+    rest (``outside``) not."""
+    X = rng.uniform(0.0, BOX, (600, dimension))
+    R = rng.uniform(0.15, 0.25, 600)
+    inside = np.flatnonzero(rng.random(600) < fraction)
+    return X, R, inside, np.setdiff1d(np.arange(600), inside)
+
+
 def near_pairs(X, R, queries, rows, reach):
     """Pairs (q, j), q in queries, j in rows, with a gap of at most reach, by brute force."""
     gap = np.linalg.norm(X[queries][:, None] - X[rows][None], axis=2) - (R[queries][:, None] + R[rows][None])
@@ -21,13 +33,9 @@ def test_a_translated_cluster_is_found_in_its_frame(seed, dimension):
     and flown again, gives the pairs with the spheres outside it that brute force gives, for
     the gap its cells were sized for and for others."""
     rng = np.random.default_rng(seed)
-    box, n = 12.0, 600
-    X = rng.uniform(0.0, box, (n, dimension))
-    R = rng.uniform(0.15, 0.25, n)
-    inside = np.flatnonzero(rng.random(n) < 0.9)
-    outside = np.setdiff1d(np.arange(n), inside)
+    X, R, inside, outside = spheres_and_cluster(rng, dimension, 0.9)
     reach = 1.3
-    frame = ClusterFrame(X, R, inside, 2.0 * R.max() + reach, box)
+    frame = ClusterFrame(X, R, inside, 2.0 * R.max() + reach, BOX)
     velocity = rng.normal(0.0, 1.0, dimension)
     for _ in range(50):
         X[inside] += 0.013 * velocity
@@ -51,18 +59,14 @@ def test_the_first_contact_along_straight_paths_is_found_in_the_frame(seed, dime
     the earliest contact the frame finds is the earliest over every pair (brute force), or
     none before the time looked at if there is none."""
     rng = np.random.default_rng(seed)
-    box, n = 12.0, 600
-    X = rng.uniform(0.0, box, (n, dimension))
-    R = rng.uniform(0.15, 0.25, n)
-    inside = np.flatnonzero(rng.random(n) < 0.97)
-    outside = np.setdiff1d(np.arange(n), inside)
-    frame = ClusterFrame(X, R, inside, 2.0 * R.max() + 1.0, box)
-    V = rng.normal(0.0, 1.0, (n, dimension))
+    X, R, inside, outside = spheres_and_cluster(rng, dimension, 0.97)
+    frame = ClusterFrame(X, R, inside, 2.0 * R.max() + 1.0, BOX)
+    V = rng.normal(0.0, 1.0, (X.shape[0], dimension))
     V[inside] = rng.normal(0.0, 0.3, dimension)
     X[inside] += 0.37 * V[inside] + 0.2  # flown and shifted as a whole
     for q in outside:  # each in a free spot: no contact at the start
         while True:
-            X[q] = rng.uniform(0.0, box, dimension)
+            X[q] = rng.uniform(0.0, BOX, dimension)
             if (np.linalg.norm(X[inside] - X[q], axis=1) > R[inside] + R[q] + 0.05).all():
                 break
     times = np.array([time_to_contact(X, V, R, q, j) for q in outside for j in inside])

@@ -38,6 +38,36 @@ CELLS_PER_SPHERE = 4
 
 
 @jit
+def _cells_over(lower, upper, side, k):
+    """Linear indices of the cells (``k`` per side of length ``side``) overlapping the box from
+    ``lower`` to ``upper``, clamped into the grid."""
+    d = lower.shape[0]
+    low = np.empty(d, dtype=np.int64)
+    span = np.empty(d, dtype=np.int64)
+    n_cells = 1
+    for a in range(d):
+        low[a] = min(max(int(math.floor(lower[a] / side)), 0), k - 1)
+        span[a] = min(max(int(math.floor(upper[a] / side)), 0), k - 1) - low[a] + 1
+        n_cells *= span[a]
+    cells = np.empty(n_cells, dtype=np.int64)
+    coords = np.zeros(d, dtype=np.int64)  # of the cell low + coords, counting up to span
+    for m in range(n_cells):
+        c = 0
+        stride = 1
+        for a in range(d):
+            c += (low[a] + coords[a]) * stride
+            stride *= k
+        cells[m] = c
+        a = 0
+        coords[0] += 1
+        while a < d - 1 and coords[a] == span[a]:
+            coords[a] = 0
+            a += 1
+            coords[a] += 1
+    return cells
+
+
+@jit
 def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R, largest, first, side, k):
     """Pairs ``(q, j)``, ``q`` in ``queries``, ``j`` in ``binned_rows`` (sorted cell by cell,
     those of cell ``c`` being ``binned_rows[first[c]:first[c + 1]]``, binned at ``binned_X``,
@@ -46,27 +76,14 @@ def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R
     positions select the candidates, within a padded distance, and the pairs are decided on
     ``X``, by the test of the whole-box searches."""
     d = X.shape[1]
-    low = np.empty(d, dtype=np.int64)
-    span = np.empty(d, dtype=np.int64)
-    coords = np.empty(d, dtype=np.int64)
     y = np.empty(d)
     pairs = np.empty((16, 2), dtype=np.int64)
     count = 0
     for q in queries:
         cutoff = (R[q] + largest + reach) * (1.0 + ROUNDING_PAD)
-        n_cells = 1
         for a in range(d):
             y[a] = X[q, a] - shift[a]
-            low[a] = min(max(int(math.floor((y[a] - cutoff) / side)), 0), k - 1)
-            span[a] = min(max(int(math.floor((y[a] + cutoff) / side)), 0), k - 1) - low[a] + 1
-            coords[a] = 0
-            n_cells *= span[a]
-        for _ in range(n_cells):  # the cells low + coords, coords counting up to span
-            c = 0
-            stride = 1
-            for a in range(d):
-                c += (low[a] + coords[a]) * stride
-                stride *= k
+        for c in _cells_over(y - cutoff, y + cutoff, side, k):
             for s in range(first[c], first[c + 1]):
                 padded = (R[q] + binned_R[s] + reach) * (1.0 + ROUNDING_PAD)
                 far = 0.0
@@ -79,12 +96,6 @@ def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R
                 if _distance_sq(X, q, j) <= limit * limit:
                     pairs = _with_pair(pairs, count, q, j)
                     count += 1
-            a = 0
-            coords[0] += 1
-            while a < d - 1 and coords[a] == span[a]:
-                coords[a] = 0
-                a += 1
-                coords[a] += 1
     return pairs[:count].copy()
 
 
@@ -113,9 +124,6 @@ def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned
     frame's positions select the candidates, the times come from ``X`` and ``V``
     (:func:`parsim.core.ts.quiet.time_to_contact`)."""
     d = X.shape[1]
-    low = np.empty(d, dtype=np.int64)
-    span = np.empty(d, dtype=np.int64)
-    coords = np.empty(d, dtype=np.int64)
     start = np.empty(d)
     end = np.empty(d)
     earliest = math.inf
@@ -127,31 +135,15 @@ def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned
         pieces = max(1, int(math.ceil(length / side)))
         reach = (R[q] + largest) * (1.0 + ROUNDING_PAD)
         for piece in range(pieces):
-            n_cells = 1
             for a in range(d):
                 u = V[q, a] - V[reference, a]
                 start[a] = X[q, a] - shift[a] + u * duration * piece / pieces
                 end[a] = X[q, a] - shift[a] + u * duration * (piece + 1) / pieces
-                low[a] = min(max(int(math.floor((min(start[a], end[a]) - reach) / side)), 0), k - 1)
-                span[a] = min(max(int(math.floor((max(start[a], end[a]) + reach) / side)), 0), k - 1) - low[a] + 1
-                coords[a] = 0
-                n_cells *= span[a]
-            for _ in range(n_cells):
-                c = 0
-                stride = 1
-                for a in range(d):
-                    c += (low[a] + coords[a]) * stride
-                    stride *= k
+            for c in _cells_over(np.minimum(start, end) - reach, np.maximum(start, end) + reach, side, k):
                 for s in range(first[c], first[c + 1]):
                     padded = (R[q] + binned_R[s]) * (1.0 + ROUNDING_PAD)
                     if _segment_distance_sq(binned_X, s, start, end) <= padded * padded:
                         earliest = min(earliest, time_to_contact(X, V, R, q, binned_rows[s]))
-                a = 0
-                coords[0] += 1
-                while a < d - 1 and coords[a] == span[a]:
-                    coords[a] = 0
-                    a += 1
-                    coords[a] += 1
     return earliest
 
 
