@@ -178,8 +178,9 @@ class _LargestCluster:
         return self._outermost
 
     def frame(self, X, R, cutoff, box_length):
-        """The owned rows of the cluster in its frame, in cells at least ``cutoff`` wide (binned
-        again when the cells are too narrow or more than twice too wide)."""
+        """The owned rows of the cluster in its frame, in cells sized for searches up to
+        ``cutoff`` (binned again when the frame's were sized for less, or for more than twice
+        as much: any size is right, these are fast)."""
         if self._frame is None or not cutoff <= self._frame.cutoff <= 2.0 * cutoff:
             self._frame = ClusterFrame(X, R, self._inside, cutoff, box_length)
         return self._frame
