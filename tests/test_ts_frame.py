@@ -75,3 +75,23 @@ def test_the_first_contact_along_straight_paths_is_found_in_the_frame(seed, dime
     for duration in (0.5 * first, 2.0 * first, 5.0):
         found = frame.first_contact(X, V, R, outside, duration)
         assert found == first if first <= duration else found > duration
+
+
+@pytest.mark.parametrize("n, volume_fraction", [(900, 0.1), (600, 0.2)])
+def test_look_aheads_along_paths_and_with_a_watch_make_the_same_run(monkeypatch, n, volume_fraction):
+    """Two independent bounds on the quiet steps of a late stage: the first contact along the
+    paths of the spheres outside the largest cluster (the default on one process) and the
+    watch's.  Runs to a single cluster make the same links in the same steps, with positions
+    equal to round-off (quiet stretches are advected in other chunks)."""
+    from parsim.core.ts import simulate_ts
+    from parsim.core.ts import stepper
+    from tests.scripts.tiled_ts_probe import initial_condition
+
+    runs = []
+    for path_queries in (stepper.PATH_QUERIES, -1):  # -1: never follow paths
+        monkeypatch.setattr(stepper, "PATH_QUERIES", path_queries)
+        runs.append(simulate_ts(*initial_condition(n, volume_fraction)))
+    paths, watch = runs
+    assert paths.stop_reason == "single_cluster" and paths.n_steps == watch.n_steps
+    assert np.array_equal(paths.links, watch.links) and np.array_equal(paths.link_steps, watch.link_steps)
+    assert np.abs(paths.positions - watch.positions).max() < 1e-9
