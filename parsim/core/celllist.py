@@ -24,6 +24,7 @@ __all__ = [
     "build_cells",
     "move_to_cell",
     "block_cells",
+    "cells_over",
     "worst_overlap",
 ]
 
@@ -166,6 +167,36 @@ def block_cells(c, k, offsets, coords, out):
             out[m] = lin
             m += 1
     return m
+
+
+@jit
+def cells_over(lower, upper, side, k):
+    """Linear indices of the cells (``k`` per side of length ``side``) overlapping the box from
+    ``lower`` to ``upper``, clamped into the grid."""
+    d = lower.shape[0]
+    low = np.empty(d, dtype=np.int64)
+    span = np.empty(d, dtype=np.int64)
+    n_cells = 1
+    for a in range(d):
+        low[a] = min(max(int(math.floor(lower[a] / side)), 0), k - 1)
+        span[a] = min(max(int(math.floor(upper[a] / side)), 0), k - 1) - low[a] + 1
+        n_cells *= span[a]
+    cells = np.empty(n_cells, dtype=np.int64)
+    coords = np.zeros(d, dtype=np.int64)  # of the cell low + coords, counting up to span
+    for m in range(n_cells):
+        c = 0
+        stride = 1
+        for a in range(d):
+            c += (low[a] + coords[a]) * stride
+            stride *= k
+        cells[m] = c
+        a = 0
+        coords[0] += 1
+        while a < d - 1 and coords[a] == span[a]:
+            coords[a] = 0
+            a += 1
+            coords[a] += 1
+    return cells
 
 
 @jit

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from parsim.core.celllist import grid_size
+from parsim.core.celllist import cells_over, grid_size
 from parsim.core.jit import jit
 from parsim.core.ts.contacts import _distance_sq, _sorted_by_cell, _with_pair
 from parsim.core.ts.quiet import time_to_contact
@@ -38,36 +38,6 @@ CELLS_PER_SPHERE = 4
 
 
 @jit
-def _cells_over(lower, upper, side, k):
-    """Linear indices of the cells (``k`` per side of length ``side``) overlapping the box from
-    ``lower`` to ``upper``, clamped into the grid."""
-    d = lower.shape[0]
-    low = np.empty(d, dtype=np.int64)
-    span = np.empty(d, dtype=np.int64)
-    n_cells = 1
-    for a in range(d):
-        low[a] = min(max(int(math.floor(lower[a] / side)), 0), k - 1)
-        span[a] = min(max(int(math.floor(upper[a] / side)), 0), k - 1) - low[a] + 1
-        n_cells *= span[a]
-    cells = np.empty(n_cells, dtype=np.int64)
-    coords = np.zeros(d, dtype=np.int64)  # of the cell low + coords, counting up to span
-    for m in range(n_cells):
-        c = 0
-        stride = 1
-        for a in range(d):
-            c += (low[a] + coords[a]) * stride
-            stride *= k
-        cells[m] = c
-        a = 0
-        coords[0] += 1
-        while a < d - 1 and coords[a] == span[a]:
-            coords[a] = 0
-            a += 1
-            coords[a] += 1
-    return cells
-
-
-@jit
 def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R, largest, first, side, k):
     """Pairs ``(q, j)``, ``q`` in ``queries``, ``j`` in ``binned_rows`` (sorted cell by cell,
     those of cell ``c`` being ``binned_rows[first[c]:first[c + 1]]``, binned at ``binned_X``,
@@ -83,7 +53,7 @@ def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R
         cutoff = (R[q] + largest + reach) * (1.0 + ROUNDING_PAD)
         for a in range(d):
             y[a] = X[q, a] - shift[a]
-        for c in _cells_over(y - cutoff, y + cutoff, side, k):
+        for c in cells_over(y - cutoff, y + cutoff, side, k):
             for s in range(first[c], first[c + 1]):
                 padded = (R[q] + binned_R[s] + reach) * (1.0 + ROUNDING_PAD)
                 far = 0.0
@@ -139,7 +109,7 @@ def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned
                 u = V[q, a] - V[reference, a]
                 start[a] = X[q, a] - shift[a] + u * duration * piece / pieces
                 end[a] = X[q, a] - shift[a] + u * duration * (piece + 1) / pieces
-            for c in _cells_over(np.minimum(start, end) - reach, np.maximum(start, end) + reach, side, k):
+            for c in cells_over(np.minimum(start, end) - reach, np.maximum(start, end) + reach, side, k):
                 for s in range(first[c], first[c + 1]):
                     padded = (R[q] + binned_R[s]) * (1.0 + ROUNDING_PAD)
                     if _segment_distance_sq(binned_X, s, start, end) <= padded * padded:

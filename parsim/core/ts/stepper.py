@@ -147,14 +147,16 @@ def check_formulation(formulation):
 
 
 class _LargestCluster:
-    """The largest cluster (``label``, ``size`` spheres) and the owned rows ``outside`` it, for
-    the labels ``cluster`` and the owned spheres ``global_id`` it was made for; and, once asked
-    for, its owned rows in their own frame (:class:`parsim.core.ts.frame.ClusterFrame`)."""
+    """The largest cluster (``label``, ``size`` spheres; ``holds_most``: more than half of all
+    spheres) and the owned rows ``outside`` it, for the labels ``cluster`` and the owned spheres
+    ``global_id`` it was made for; and, once asked for, its owned rows in their own frame
+    (:class:`parsim.core.ts.frame.ClusterFrame`)."""
 
     def __init__(self, cluster, n_clusters, global_id, own_cluster):
         sizes = np.bincount(cluster, minlength=n_clusters)
         self.label = int(sizes.argmax())
         self.size = int(sizes[self.label])
+        self.holds_most = 2 * self.size > cluster.size  # of all spheres: the same on every process
         inside = own_cluster == self.label
         self.outside = np.flatnonzero(~inside)
         self._inside = np.flatnonzero(inside)
@@ -301,7 +303,7 @@ class _Run:
     def _follows_paths(self, largest):
         """Whether the look-aheads follow the paths of the few spheres outside the largest
         cluster through its frame, with no watch (one process, at most ``PATH_QUERIES`` of them)."""
-        return self.domain.size == 1 and 2 * (self.n - largest.size) < self.n and largest.outside.size <= PATH_QUERIES
+        return self.domain.size == 1 and largest.holds_most and largest.outside.size <= PATH_QUERIES
 
     def _steps_before_contact(self, largest, duration, dt):
         """Steps of length ``dt`` before any two spheres of different clusters, flying straight,
@@ -326,7 +328,7 @@ class _Run:
                       self.domain.max_halo_width - self.contact, self._affordable_horizon(self.n - largest.size))
         _, ids, X, R, cluster = self._with_ghosts(self.contact + horizon)
         n_owned = self.X.shape[0]
-        if 2 * (self.n - largest.size) < self.n:  # (on every process alike) search in the largest one's frame
+        if largest.holds_most:  # search in the largest one's frame
             pairs = self._pairs_outside(largest, X, R, cluster, n_owned, horizon, self.contact + horizon)
         else:
             k, side = grid_size(self.L, self.contact + horizon, self.d, self.n, CONTACT_CELLS_PER_SPHERE)
