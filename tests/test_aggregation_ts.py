@@ -443,3 +443,11 @@ def test_a_minimisation_that_throws_a_sphere_is_reported(monkeypatch):
     with pytest.raises(stepper.MinimiserFailure, match=r"moved a sphere by more than .*time step 1 "):
         simulate_ts(lattice_positions(n, 2, L, rng), isotropic_velocities(n, 2, 1.0, rng), np.full(n, R), np.ones(n),
                     L, time_step_factor=0.05)
+
+
+@pytest.mark.parametrize("d", [1, 4])
+def test_a_dimension_other_than_2_or_3_is_refused(d):
+    """The DAHA kernels are written for discs and spheres: other positions are refused up front
+    with the shape they had."""
+    with pytest.raises(ValueError, match=rf"positions must have shape \(n, 2\) or \(n, 3\).*\(5, {d}\)"):
+        simulate_ts(np.zeros((5, d)), np.ones((5, d)), np.full(5, R), np.ones(5), 10.0)

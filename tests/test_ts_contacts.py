@@ -92,8 +92,10 @@ def test_refreshing_the_moved_spheres_never_misses_a_contact(d):
 def test_incidence_lists_each_pair_at_its_moving_ends():
     a = np.array([0, 0, 1, 2])
     b = np.array([1, 3, 2, 3])  # sphere 3 is an anchor
-    ptr, pair_of = incidence(a, b, 3)
+    ptr, pair_of, partner = incidence(a, b, 3)
     assert [sorted(pair_of[ptr[i]:ptr[i + 1]].tolist()) for i in range(3)] == [[0, 1], [0, 2], [2, 3]]
+    ends = np.where(a[pair_of] == np.repeat(np.arange(3), np.diff(ptr)), b[pair_of], a[pair_of])
+    assert np.array_equal(partner, ends)
 
 
 @pytest.mark.parametrize("d", [2, 3])

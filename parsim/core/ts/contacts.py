@@ -25,12 +25,15 @@ def _with_pair(pairs, count, i, j):
 
 
 @jit
-def _distance_sq(X, i, j):
-    s = 0.0
-    for a in range(X.shape[1]):
-        dx = X[i, a] - X[j, a]
-        s += dx * dx
-    return s
+def _distance_sq(A, a, B, b):
+    """``|A_a - B_b|^2`` in d = 2 or 3, written out, the sum in the order of a loop over the
+    components: with that loop over the runtime d, DAHA's multiplier update over all pairs took
+    twice as long (20.9 against 10.6 ns per sphere update, N = 102 400)."""
+    dx, dy = A[a, 0] - B[b, 0], A[a, 1] - B[b, 1]
+    if A.shape[1] == 2:
+        return dx * dx + dy * dy
+    dz = A[a, 2] - B[b, 2]
+    return dx * dx + dy * dy + dz * dz
 
 
 @jit
@@ -138,7 +141,7 @@ def _pairs_by_cells(Xs, radius, group_of, queried, order, first, reach, k):
                     if not (queried[s] or queried[t]) or group_of[t] == group_of[s]:
                         continue
                     limit = radius[s] + radius[t] + reach
-                    if _distance_sq(Xs, s, t) <= limit * limit:
+                    if _distance_sq(Xs, s, Xs, t) <= limit * limit:
                         i, j = order[s], order[t]
                         if queried[s] and queried[t]:
                             i, j = min(i, j), max(i, j)
@@ -170,7 +173,7 @@ def _pairs_by_queries(Xs, radius, group_of, queried, order, first, cell_of, reac
                 if t == s or (queried[t] and j < i) or group_of[t] == group_of[s]:
                     continue
                 limit = radius[s] + radius[t] + reach
-                if _distance_sq(Xs, s, t) <= limit * limit:
+                if _distance_sq(Xs, s, Xs, t) <= limit * limit:
                     pairs = _with_pair(pairs, count, i, j)
                     count += 1
     return pairs[:count].copy()
@@ -324,7 +327,7 @@ def _binned_pairs(X, R, lower, queries, reach, side, k, head, nxt, prv, cell_of,
             while j >= 0:
                 if j != i and not (is_query[j] and j < i):
                     limit = R[i] + R[j] + reach
-                    if _distance_sq(X, i, j) <= limit * limit:
+                    if _distance_sq(X, i, X, j) <= limit * limit:
                         pairs = _with_pair(pairs, found, i, j)
                         found += 1
                 j = nxt[j]
@@ -399,7 +402,8 @@ def _merge_kept(pair_a, pair_b, moved, fresh_a, fresh_b):
 
 @jit
 def incidence(pair_a, pair_b, n_moving):
-    """CSR lists of the pairs incident to each moving sphere, in pair order: ``(ptr, pair_of)``."""
+    """CSR lists of the pairs incident to each moving sphere, in pair order: ``(ptr, pair_of,
+    partner)``, ``partner[e]`` the other end of pair ``pair_of[e]``."""
     ptr = np.zeros(n_moving + 1, dtype=np.int64)
     for p in range(pair_a.shape[0]):
         for end in (pair_a[p], pair_b[p]):
@@ -409,9 +413,12 @@ def incidence(pair_a, pair_b, n_moving):
         ptr[i + 1] += ptr[i]
     fill = ptr[:-1].copy()
     pair_of = np.empty(ptr[n_moving], dtype=np.int64)
+    partner = np.empty(ptr[n_moving], dtype=np.int64)
     for p in range(pair_a.shape[0]):
-        for end in (pair_a[p], pair_b[p]):
-            if end < n_moving:
-                pair_of[fill[end]] = p
-                fill[end] += 1
-    return ptr, pair_of
+        a, b = pair_a[p], pair_b[p]
+        pair_of[fill[a]], partner[fill[a]] = p, b
+        fill[a] += 1
+        if b < n_moving:
+            pair_of[fill[b]], partner[fill[b]] = p, a
+            fill[b] += 1
+    return ptr, pair_of, partner

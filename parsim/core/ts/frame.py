@@ -63,7 +63,7 @@ def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R
                     continue
                 j = binned_rows[s]
                 limit = R[q] + R[j] + reach
-                if _distance_sq(X, q, j) <= limit * limit:
+                if _distance_sq(X, q, X, j) <= limit * limit:
                     pairs = _with_pair(pairs, count, q, j)
                     count += 1
     return pairs[:count].copy()

@@ -35,13 +35,13 @@ class Problem:
     The first ``n_moving`` members move; the rest are anchors, the ghost rows from
     ``first_ghost`` on (none on one process).  Links and candidate pairs are stored per
     moving sphere in CSR form (``*_ptr`` of length ``n_moving + 1``); ``pair_a < pair_b``
-    are local indices, ``pair_of`` lists the pairs incident to each moving sphere,
-    ``link_to`` its linked partners.  Candidate pairs are those with a gap of at most
-    ``reach`` when their spheres' pairs were last searched (the minimiser refreshes them
-    sphere by sphere, so that none that touches is missing); :meth:`refresh_pairs`
-    recomputes them and the cross-pair bookkeeping:
-    ``pair_counted`` (the pairs this process counts in sums), ``cross_pairs``, and per
-    moving ghost its local moving partners (``ghost_ptr``, ``ghost_partner``).
+    are local indices, ``pair_of`` lists the pairs incident to each moving sphere and
+    ``pair_partner`` their other ends, ``link_to`` its linked partners.  Candidate pairs are
+    those with a gap of at most ``reach`` when their spheres' pairs were last searched (the
+    minimiser refreshes them sphere by sphere, so that none that touches is missing);
+    :meth:`refresh_pairs` recomputes them and the cross-pair bookkeeping: ``pair_counted``
+    (the pairs this process counts in sums), ``cross_pairs``, and per moving ghost its local
+    moving partners (``ghost_ptr``, ``ghost_partner``).
     """
 
     members: np.ndarray
@@ -58,6 +58,7 @@ class Problem:
     pair_b: np.ndarray = None
     pair_ptr: np.ndarray = None
     pair_of: np.ndarray = None
+    pair_partner: np.ndarray = None  #: the other end of the pair pair_of[e]
     pair_counted: np.ndarray = None
     cross_pairs: np.ndarray = None
     ghost_ptr: np.ndarray = None
@@ -79,7 +80,7 @@ class Problem:
             self.pair_a, self.pair_b, source = updated_candidate_pairs(self.positions, self.radii, self.n_moving,
                                                                        self.reach, self.pair_a, self.pair_b, moved,
                                                                        self.binned)
-        self.pair_ptr, self.pair_of = incidence(self.pair_a, self.pair_b, self.n_moving)
+        self.pair_ptr, self.pair_of, self.pair_partner = incidence(self.pair_a, self.pair_b, self.n_moving)
         if self.moving_ghost[self.first_ghost:].any():
             crossing = self.moving_ghost[self.pair_b]  # pair_a < n_moving <= pair_b for these
             self.cross_pairs = np.flatnonzero(crossing)

@@ -118,7 +118,7 @@ def _touching(X, R, cluster, rows):
         if i < 0 or j < 0 or cluster[i] == cluster[j]:
             continue
         contact = R[i] + R[j]
-        if _distance_sq(X, i, j) <= contact * contact:
+        if _distance_sq(X, i, X, j) <= contact * contact:
             found[count] = rows[p]
             count += 1
     return found[:count].copy()

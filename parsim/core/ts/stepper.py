@@ -605,7 +605,8 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
 
     Parameters
     ----------
-    positions, velocities, radii, masses : as for :func:`parsim.core.aggregation_ed.simulate_ed`.
+    positions, velocities, radii, masses : as for :func:`parsim.core.aggregation_ed.simulate_ed`,
+        in d = 2 or 3.
     time_step_factor : float > 0
         ``dt(0) = factor L / max|V|`` (Table 1: 0.005, 0.01, 0.015).
     formulation : "almost_rigid" (section 3.3) or "non_rigid" (section 3.1).
@@ -625,6 +626,8 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
     """
     check_formulation(formulation)
     X = np.array(positions, dtype=np.float64, copy=True)
+    if X.ndim != 2 or X.shape[1] not in (2, 3):  # the DAHA kernels are written for discs and spheres
+        raise ValueError(f"positions must have shape (n, 2) or (n, 3) for the time-stepping method, got {X.shape}")
     V = np.array(velocities, dtype=np.float64, copy=True)
     R = np.ascontiguousarray(radii, dtype=np.float64)
     m = np.ascontiguousarray(masses, dtype=np.float64)
