@@ -451,3 +451,10 @@ def test_a_dimension_other_than_2_or_3_is_refused(d):
     with the shape they had."""
     with pytest.raises(ValueError, match=rf"positions must have shape \(n, 2\) or \(n, 3\).*\(5, {d}\)"):
         simulate_ts(np.zeros((5, d)), np.ones((5, d)), np.full(5, R), np.ones(5), 10.0)
+
+
+def test_a_minimisation_in_one_dimension_is_refused():
+    """Its kernels are written for discs and spheres: a problem of points on a line is refused
+    before any kernel reads a second coordinate that is not there."""
+    with pytest.raises(ValueError, match=r"discs or spheres \(d = 2 or 3\).*\(2, 1\)"):
+        problem_of([[1.0], [1.3]], [(0, 1)])

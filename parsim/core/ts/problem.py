@@ -174,6 +174,8 @@ def build_problem(X, R, moving, anchors, links, reach, local_of, global_id=None,
     ``links`` are between global ids.  ``reach`` is the largest gap of a constraint
     candidate pair; ``local_of`` is scratch over the global ids filled with -1, returned so.
     """
+    if X.shape[1] not in (2, 3):  # the contact and DAHA kernels are written out for discs and spheres
+        raise ValueError(f"a minimisation holds discs or spheres (d = 2 or 3), got positions of shape {X.shape}")
     own = np.concatenate([moving, anchors])
     rows = [X[own]]
     radii = [R[own]]
