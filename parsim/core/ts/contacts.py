@@ -403,7 +403,8 @@ def _merge_kept(pair_a, pair_b, moved, fresh_a, fresh_b):
 @jit
 def incidence(pair_a, pair_b, n_moving):
     """CSR lists of the pairs incident to each moving sphere, in pair order: ``(ptr, pair_of,
-    partner)``, ``partner[e]`` the other end of pair ``pair_of[e]``."""
+    partner)``, ``partner[e]`` the other end of pair ``pair_of[e]``.  Every ``pair_a`` is
+    moving (the candidates' ``a = min < b``)."""
     ptr = np.zeros(n_moving + 1, dtype=np.int64)
     for p in range(pair_a.shape[0]):
         for end in (pair_a[p], pair_b[p]):
