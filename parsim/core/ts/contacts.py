@@ -24,6 +24,14 @@ def _with_pair(pairs, count, i, j):
     return pairs
 
 
+def check_discs_or_spheres(positions):
+    """Refuse positions that are not ``(n, 2)`` or ``(n, 3)``: the time-stepping kernels read
+    the components directly (:func:`_distance_sq`, the DAHA kick)."""
+    if positions.ndim != 2 or positions.shape[1] not in (2, 3):
+        raise ValueError(f"positions must have shape (n, 2) or (n, 3): the time-stepping kernels handle discs or "
+                         f"spheres (d = 2 or 3), got shape {positions.shape}")
+
+
 @jit
 def _distance_sq(A, a, B, b):
     """``|A_a - B_b|^2`` in d = 2 or 3, written out, the sum in the order of a loop over the

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsim.core.jit import jit
-from parsim.core.ts.contacts import BinnedRows, candidate_pairs, incidence, updated_candidate_pairs
+from parsim.core.ts.contacts import (BinnedRows, candidate_pairs, check_discs_or_spheres, incidence,
+                                    updated_candidate_pairs)
 from parsim.core.ts.links import link_index
 
 
@@ -174,8 +175,7 @@ def build_problem(X, R, moving, anchors, links, reach, local_of, global_id=None,
     ``links`` are between global ids.  ``reach`` is the largest gap of a constraint
     candidate pair; ``local_of`` is scratch over the global ids filled with -1, returned so.
     """
-    if X.shape[1] not in (2, 3):  # the contact and DAHA kernels are written out for discs and spheres
-        raise ValueError(f"a minimisation holds discs or spheres (d = 2 or 3), got positions of shape {X.shape}")
+    check_discs_or_spheres(X)
     own = np.concatenate([moving, anchors])
     rows = [X[own]]
     radii = [R[own]]

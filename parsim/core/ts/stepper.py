@@ -62,7 +62,8 @@ import numpy as np
 from parsim.core.celllist import grid_size
 from parsim.core.ts.clusters import (apply_reflections, cluster_momenta, free_flight, involved_spheres, merge_clusters,
                                      reflections, set_cluster_velocities)
-from parsim.core.ts.contacts import cross_cluster_contacts, cross_cluster_pairs, unlinked_contacts
+from parsim.core.ts.contacts import (check_discs_or_spheres, cross_cluster_contacts, cross_cluster_pairs,
+                                    unlinked_contacts)
 from parsim.core.ts.daha import DahaParameters, minimise
 from parsim.core.ts.domain import SerialDomain
 from parsim.core.ts.frame import ClusterFrame
@@ -626,8 +627,7 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
     """
     check_formulation(formulation)
     X = np.array(positions, dtype=np.float64, copy=True)
-    if X.ndim != 2 or X.shape[1] not in (2, 3):  # the DAHA kernels are written for discs and spheres
-        raise ValueError(f"positions must have shape (n, 2) or (n, 3) for the time-stepping method, got {X.shape}")
+    check_discs_or_spheres(X)
     V = np.array(velocities, dtype=np.float64, copy=True)
     R = np.ascontiguousarray(radii, dtype=np.float64)
     m = np.ascontiguousarray(masses, dtype=np.float64)
