@@ -328,7 +328,7 @@ def test_minimisations_stop_on_cells_of_four_diameters_or_on_finer_tiles(k):
 
 def test_a_later_round_that_fails_in_fine_tiles_is_solved_in_the_first_rounds(monkeypatch):
     """Every later round is made to fail in its fine tiles: the run still ends in one cluster
-    without overlap, each failure (given FINE_TILE_ITERATIONS) followed by the same round in
+    without overlap, each failure (given TILED_ITERATIONS) followed by the same round in
     the first round's tiles (given max_iterations)."""
     tried = []  # (tiles per side, whether they are the fine ones of a later round, iteration cap)
     real_solve, real_minimise = stepper._Run._solve, stepper.minimise
@@ -351,8 +351,33 @@ def test_a_later_round_that_fails_in_fine_tiles_is_solved_in_the_first_rounds(mo
     fine = [n for n, (_, is_fine, _) in enumerate(tried) if is_fine]
     assert fine, "no later round ran"
     assert all(not tried[n + 1][1] and tried[n + 1][0] < tried[n][0] for n in fine)
-    assert {tried[n][2] for n in fine} == {stepper.FINE_TILE_ITERATIONS}
+    assert {tried[n][2] for n in fine} == {stepper.TILED_ITERATIONS}
     assert {cap for _, is_fine, cap in tried if not is_fine} == {PARAMS.max_iterations}
+
+
+def test_a_minimisation_that_fails_in_tiles_is_solved_again_in_one_tile(monkeypatch):
+    """Every attempt in several tiles is made to give up at once: the run is then, bit for bit,
+    the run in one tile, where every interacting sphere moves and none is an anchor (the way
+    out for a sphere caged by anchors, as one was at N = 10^6)."""
+    x, v, radii, masses, length = paper_system(3000, 0.3, seed=3)
+    first_rounds = []
+    real_tilings = stepper._Run._tilings
+
+    def tilings(run, involved, first_round):
+        tried = real_tilings(run, involved, first_round)
+        if first_round:
+            first_rounds.append(tried)
+        return tried
+
+    monkeypatch.setattr(stepper._Run, "_tilings", tilings)
+    monkeypatch.setattr(stepper, "TILED_ITERATIONS", 0)
+    fallen_back = simulate_ts(x, v, radii, masses, length)
+    one_tile = simulate_ts(x, v, radii, masses, length, tiles=1)
+    assert any(tried[0] > 1 for tried in first_rounds), "no first round in several tiles"
+    assert all(tried[-1] == 1 for tried in first_rounds)
+    assert fallen_back.n_minimisations > one_tile.n_minimisations  # the attempts in tiles count
+    assert np.array_equal(fallen_back.links, one_tile.links)
+    assert np.array_equal(fallen_back.positions, one_tile.positions)
 
 
 def test_time_step_grows_to_twice_the_initial_one():

@@ -35,7 +35,9 @@ Formulations.  ``"non_rigid"`` (section 3.1): every sphere of the interacting cl
 moves and every link attracts (eq. 3.5).  ``"almost_rigid"`` (section 3.3): only the
 interacting spheres in the tiles holding a new link move, those in the surrounding
 tiles are read as fixed anchors, and a link attracts only while its length is at most
-``Delta_W`` (eq. 3.30, 3.31); see :mod:`parsim.core.ts.tiles`.
+``Delta_W`` (eq. 3.30, 3.31); see :mod:`parsim.core.ts.tiles`.  A minimisation that does
+not converge in its tiles within ``TILED_ITERATIONS`` (a sphere caged by anchors cannot) is
+solved again in one tile, every interacting sphere moving (``_Run._tilings``).
 
 Repeated rounds (step 2e).  The first minimisation of a time step moves the tiles holding
 the links made by free flight; each later round moves only the tiles holding the links the
@@ -91,9 +93,9 @@ HALO_MARGIN = 2.0
 #: A minimisation that moves a sphere farther than this (in largest radii) has gone unstable
 #: and is reported (DAHA resolves overlaps of at most 2 R; a few radii of chain pushing is normal).
 MAX_DISPLACEMENT = 10.0
-#: A later round of step 2e tried in fine tiles gives up after this many DAHA iterations and is
-#: solved in the first round's tiles (such rounds converge in at most a few thousand).
-FINE_TILE_ITERATIONS = 10_000
+#: A minimisation in tiles gives up after this many DAHA iterations and is solved again in
+#: coarser tiles (``_Run._tilings``; minimisations converge in at most a few thousand).
+TILED_ITERATIONS = 10_000
 #: Rounds of steps 2c-2d in one time step before it is reported as not settling.
 MAX_LINK_ROUNDS = 1000
 #: A watch lists pairs up to the gap the fastest pair closes in this many steps (doubling after
@@ -431,7 +433,7 @@ class _Run:
         involved = involved_spheres(self.cluster, self.n_clusters, made)
         tilings = self._tilings(involved, first_round=latest.shape[0] == made.shape[0])
         for k in tilings:
-            cap = self.daha.max_iterations if k == tilings[-1] else min(self.daha.max_iterations, FINE_TILE_ITERATIONS)
+            cap = self.daha.max_iterations if k == tilings[-1] else min(self.daha.max_iterations, TILED_ITERATIONS)
             moving, problem, outcome = self._solve(involved, latest, k, drift, replace(self.daha, max_iterations=cap))
             if outcome.converged or not outcome.finite or outcome.left_halo:
                 break
@@ -460,26 +462,30 @@ class _Run:
         return moving
 
     def _tilings(self, involved, first_round):
-        """Tiles per side to minimise in, in the order tried: a later round of step 2e tries
-        finer tiles (:mod:`parsim.core.ts.tiles`) for at most ``FINE_TILE_ITERATIONS`` and,
-        should its spheres not find a configuration that meets the stopping tests between the
-        anchors so near, the first round's (at N = 102 400, V_f = 0.1 one of 16 spheres among
-        71 links did not)."""
+        """Tiles per side to minimise in, in the order tried, each but the last for at most
+        ``TILED_ITERATIONS``.  A later round of step 2e tries finer tiles
+        (:mod:`parsim.core.ts.tiles`) before the first round's: at N = 102 400, V_f = 0.1 the 16
+        spheres of one round could not meet the stopping tests between anchors so near.  The
+        last resort is one tile, every involved sphere moving and none held as an anchor: at
+        N = 10^6, V_f = 0.3 a first round of 494 361 spheres left one caged 0.16 deep by three
+        anchors, and it stayed caged for 100 000 iterations."""
         if self.formulation != "almost_rigid":
             return [1]
         if self.tiles:
-            return [self.tiles]
-        n_interacting = int(involved.sum())
-        law = tiles_per_side(n_interacting, self.d, self.L, self.min_tile)
-        fine = later_round_tiles_per_side(n_interacting, self.d, self.L, self.min_tile)
-        return [law] if first_round or fine == law else [fine, law]
+            tilings = [self.tiles]
+        else:
+            n_interacting = int(involved.sum())
+            law = tiles_per_side(n_interacting, self.d, self.L, self.min_tile)
+            fine = later_round_tiles_per_side(n_interacting, self.d, self.L, self.min_tile)
+            tilings = [law] if first_round or fine == law else [fine, law]
+        return tilings if tilings[-1] == 1 else tilings + [1]
 
     def _solve(self, involved, latest, k, drift, daha):
         """DAHA (parameters ``daha``) on the ``involved`` spheres in the tiles (``k`` per side)
         holding an end of a ``latest`` link, the surrounding tiles' as anchors:
         ``(moving, problem, outcome)``.
         A sphere leaving the halo doubles the margin and starts again.  A failed attempt in
-        fine tiles counts as a minimisation of its own."""
+        some tiles counts as a minimisation of its own."""
         seeds = np.flatnonzero(np.isin(self.global_id, latest.reshape(-1)))
         active = np.unique(self.domain.gather(tiles_of(self.X, seeds, self.L, k)))
         moving, anchors = select_spheres(self.X, involved[self.global_id], active, self.L, k)
@@ -616,6 +622,7 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
     max_time, max_steps : stop there if several clusters remain.
     tiles : int or None
         Tiles per side (almost-rigid); ``None`` follows the law of :mod:`parsim.core.ts.tiles`.
+        A minimisation that does not converge in them is solved again in one tile.
     domain : where the spheres live (:mod:`parsim.core.ts.domain`); default one process,
         :class:`parsim.parallel.tiled.DecomposedDomain` for a run over MPI ranks.  Every rank
         passes the same arguments and gets the same result.
