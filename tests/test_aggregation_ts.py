@@ -329,7 +329,7 @@ def test_minimisations_stop_on_cells_of_four_diameters_or_on_finer_tiles(k):
 def test_a_later_round_that_fails_in_fine_tiles_is_solved_in_the_first_rounds(monkeypatch):
     """Every later round is made to fail in its fine tiles: the run still ends in one cluster
     without overlap, each failure (given TILED_ITERATIONS) followed by the same round in
-    the first round's tiles (given max_iterations)."""
+    the first round's tiles (one tile at this size, given max_iterations)."""
     tried = []  # (tiles per side, whether they are the fine ones of a later round, iteration cap)
     real_solve, real_minimise = stepper._Run._solve, stepper.minimise
 

@@ -126,7 +126,9 @@ minimisation for 4600 of its 5393 iterations; a later round in fine tiles failed
 and a tile with a moving sphere that overlaps a moving sphere of a jammed tile does not
 settle, so the spheres pressing on the jam can give way.  Those two minimisations replayed
 stop after 689 and 609 iterations; the two above are unchanged (849 and 657), as a tile
-that is still moving, or has been deep only for a moment, holds nothing open.
+that is still moving, or has been deep only for a moment, holds nothing open.  A sphere caged by
+anchors, which never move, stays caged whatever the iterations: the stepper then gives up and
+solves the minimisation again in one tile, without anchors (:mod:`parsim.core.ts.stepper`).
 
 Initial multipliers.  Eq. 3.26 sets ``lambda_ij = lambda max(0, phi_ij)``.  A link that
 took part in the previous minimisation ended it at a critical point of (3.8) with its
