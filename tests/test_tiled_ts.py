@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from parsim.core.ts import simulate_ts
+from parsim.core.ts import simulate_ts, stepper
 from tests.mpi import run_mpi
 
 REPOSITORY = Path(__file__).resolve().parent.parent
@@ -77,6 +77,21 @@ def test_a_3d_task_on_2_ranks_is_the_serial_run(tmp_path):
     assert np.array_equal(two["links"], serial.links[order])
     assert np.array_equal(two["cluster"], serial.cluster)
     assert np.abs(two["positions"] - serial.positions).max() <= POSITION_TOLERANCE_RADII * float(two["radius"])
+
+
+def test_minimisations_given_up_in_tiles_are_solved_in_one_tile_on_2_ranks(tmp_path):
+    """Every attempt in several tiles gives up at once: the run on 2 ranks is then the serial
+    run in one tile, every interacting sphere moving and none an anchor."""
+    from tests.scripts.tiled_ts_probe import TIME_STEP_FACTOR, initial_condition
+
+    two = run_probe(tmp_path, 2, 3000, 0.3, 3, 2, stepper.HALO_MARGIN, 0)
+    x, v, r, m, L = initial_condition(3000, 0.3)
+    one_tile = simulate_ts(x, v, r, m, L, time_step_factor=TIME_STEP_FACTOR, tiles=1)
+    order = np.lexsort((one_tile.links[:, 1], one_tile.links[:, 0]))
+    assert np.array_equal(two["links"], one_tile.links[order])
+    assert np.array_equal(two["cluster"], one_tile.cluster)
+    assert two["counters"][3] > one_tile.n_minimisations  # the attempts in tiles were made
+    assert np.abs(two["positions"] - one_tile.positions).max() <= POSITION_TOLERANCE_RADII * float(two["radius"])
 
 
 @pytest.mark.parametrize("ranks", [2, 4])

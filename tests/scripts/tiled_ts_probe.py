@@ -1,9 +1,11 @@
 """Run one fixed-seed TS aggregation decomposed over every rank and write what it ended with.
 
-    mpiexec -n K python tests/scripts/tiled_ts_probe.py OUT.npz N VOLUME_FRACTION [SEED [DIMENSION [HALO_MARGIN]]]
+    mpiexec -n K python tests/scripts/tiled_ts_probe.py OUT.npz N VOLUME_FRACTION [SEED [DIMENSION [HALO_MARGIN
+                                                        [TILED_ITERATIONS]]]]
 
 HALO_MARGIN (in radii) replaces the stepper's first halo margin: a small one makes
-minimisations leave their halo and run again with a wider one.
+minimisations leave their halo and run again with a wider one.  TILED_ITERATIONS replaces
+the iterations after which a minimisation in several tiles gives up (0: every one does).
 
 Rank 0 writes the final positions, velocities, cluster labels, links (sorted) and counters
 to OUT.npz; tests/test_tiled_ts.py compares the files of 1, 2 and 4 ranks.
@@ -50,6 +52,8 @@ if __name__ == "__main__":
     try:
         if len(sys.argv) > 6:
             stepper.HALO_MARGIN = float(sys.argv[6])
+        if len(sys.argv) > 7:
+            stepper.TILED_ITERATIONS = int(sys.argv[7])
         main(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), *map(int, sys.argv[4:6]))
     except Exception:  # noqa: BLE001 - one failing rank must end every rank, with its traceback
         traceback.print_exc()
