@@ -40,6 +40,15 @@ def assert_same_run(run, reference):
     assert run["time"] == pytest.approx(float(reference["time"]), rel=1e-12)
 
 
+def assert_is_the_serial_run(run, serial):
+    """A probe's run made the links (sorted in the probe) and clusters of ``serial`` (a
+    :func:`simulate_ts` result), its positions to round-off."""
+    order = np.lexsort((serial.links[:, 1], serial.links[:, 0]))
+    assert np.array_equal(run["links"], serial.links[order])
+    assert np.array_equal(run["cluster"], serial.cluster)
+    assert np.abs(run["positions"] - serial.positions).max() <= POSITION_TOLERANCE_RADII * float(run["radius"])
+
+
 def test_a_fixed_seed_task_is_the_same_on_1_2_and_4_ranks(tmp_path):
     task = (400, 0.3)
     one, two, four = (run_probe(tmp_path, ranks, *task) for ranks in (1, 2, 4))
@@ -72,11 +81,7 @@ def test_a_3d_task_on_2_ranks_is_the_serial_run(tmp_path):
 
     two = run_probe(tmp_path, 2, 500, 0.06, 3, 3)
     x, v, r, m, L = initial_condition(500, 0.06, 3, 3)
-    serial = simulate_ts(x, v, r, m, L, time_step_factor=0.01)
-    order = np.lexsort((serial.links[:, 1], serial.links[:, 0]))
-    assert np.array_equal(two["links"], serial.links[order])
-    assert np.array_equal(two["cluster"], serial.cluster)
-    assert np.abs(two["positions"] - serial.positions).max() <= POSITION_TOLERANCE_RADII * float(two["radius"])
+    assert_is_the_serial_run(two, simulate_ts(x, v, r, m, L, time_step_factor=0.01))
 
 
 def test_minimisations_given_up_in_tiles_are_solved_in_one_tile_on_2_ranks(tmp_path):
@@ -87,11 +92,8 @@ def test_minimisations_given_up_in_tiles_are_solved_in_one_tile_on_2_ranks(tmp_p
     two = run_probe(tmp_path, 2, 3000, 0.3, 3, 2, stepper.HALO_MARGIN, 0)
     x, v, r, m, L = initial_condition(3000, 0.3)
     one_tile = simulate_ts(x, v, r, m, L, time_step_factor=TIME_STEP_FACTOR, tiles=1)
-    order = np.lexsort((one_tile.links[:, 1], one_tile.links[:, 0]))
-    assert np.array_equal(two["links"], one_tile.links[order])
-    assert np.array_equal(two["cluster"], one_tile.cluster)
+    assert_is_the_serial_run(two, one_tile)
     assert two["counters"][3] > one_tile.n_minimisations  # the attempts in tiles were made
-    assert np.abs(two["positions"] - one_tile.positions).max() <= POSITION_TOLERANCE_RADII * float(two["radius"])
 
 
 @pytest.mark.parametrize("ranks", [2, 4])
