@@ -233,16 +233,16 @@ def test_a_cluster_past_a_wall_is_mirrored_back_as_a_whole():
     """Item (ii): after the free flight a cluster with a sphere past a wall is mirrored across it
     as a whole, that sphere as far inside as it was outside, its normal velocity turned inwards;
     the other clusters fly on."""
-    X = np.array([[9.5, 5.0], [9.0, 5.0], [5.0, 5.0], [0.6, 2.0]])
-    V = np.array([[1.0, 0.5], [1.0, 0.5], [1.0, 0.0], [-1.0, 0.0]])
-    R = np.full(4, 0.25)
-    cluster = np.array([0, 0, 1, 2])  # discs 0 and 1 form one cluster
+    X = np.array([[9.5, 5.0], [9.0, 5.0], [5.0, 5.0], [0.6, 2.0], [5.0, 8.0]])
+    V = np.array([[1.0, 0.5], [1.0, 0.5], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]])
+    R = np.full(5, 0.25)
+    cluster = np.array([0, 0, 1, 2, 3])  # discs 0 and 1 form one cluster
     where, extent = free_flight(X, V, R, cluster, 10.0, 0.5)
     assert where.tolist() == [[0, 0], [2, 0]]  # disc 0 reaches 10.25, disc 3 -0.15
     where, shift, sign = reflections(where, extent, 10.0)
     apply_reflections(X, V, cluster, where, shift, sign)
-    assert np.allclose(X, [[9.5, 5.25], [9.0, 5.25], [5.5, 5.0], [0.4, 2.0]], rtol=0, atol=1e-12)
-    assert V.tolist() == [[-1.0, 0.5], [-1.0, 0.5], [1.0, 0.0], [1.0, 0.0]]
+    assert np.allclose(X, [[9.5, 5.25], [9.0, 5.25], [5.5, 5.0], [0.4, 2.0], [5.0, 8.5]], rtol=0, atol=1e-12)
+    assert V.tolist() == [[-1.0, 0.5], [-1.0, 0.5], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]
     where, _ = free_flight(np.full((9, 2), 9.5), np.ones((9, 2)), np.ones(9), np.arange(9), 10.0, 0.25)
     assert where.tolist() == [[i, a] for i in range(9) for a in range(2)]  # every disc past two walls
 
@@ -278,7 +278,7 @@ def test_two_discs_link_at_the_first_step_they_overlap(monkeypatch):
 
 def test_quiet_steps_change_nothing_but_round_off(monkeypatch):
     """Quiet steps fused into one advection, and contact searches answered by the watch, give the
-    links of the run that searches the whole box at every step."""
+    links and the histories of the run that searches the whole box at every step."""
     x, v, radii, masses, length = paper_system(200, 0.1, seed=6)
     watched = []
     real_contacts = Watch.contacts
@@ -295,6 +295,10 @@ def test_quiet_steps_change_nothing_but_round_off(monkeypatch):
     assert np.array_equal(fused.links, stepwise.links) and np.array_equal(fused.link_steps, stepwise.link_steps)
     assert (fused.n_steps, fused.n_wall_reflections) == (stepwise.n_steps, stepwise.n_wall_reflections)
     assert np.allclose(fused.positions, stepwise.positions, rtol=0, atol=1e-9)
+    # a quiet stretch's histories are the steps' own: the same M, and t added up step by step
+    assert fused.cluster_history.size == fused.n_steps
+    assert np.array_equal(fused.cluster_history, stepwise.cluster_history)
+    assert np.array_equal(fused.time_history, stepwise.time_history)
 
 
 def test_almost_rigid_with_one_tile_is_the_non_rigid_method():

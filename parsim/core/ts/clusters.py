@@ -46,6 +46,15 @@ def free_flight(X, V, R, cluster, box_length, duration):
     return where, extent
 
 
+@jit
+def translate(X, V, duration):
+    """Item (i) for a flight that reaches no wall, in place: ``X += duration V`` (as
+    :func:`free_flight`, without its search for spheres past a wall)."""
+    for i in range(X.shape[0]):
+        for a in range(X.shape[1]):
+            X[i, a] += duration * V[i, a]
+
+
 def reflections(where, extent, box_length):
     """Item (ii): every cluster reaching past a wall is mirrored across it as a whole (its
     extreme sphere then lies as far inside as it was outside) and its velocity component
@@ -70,15 +79,24 @@ def reflections(where, extent, box_length):
 
 @jit
 def apply_reflections(X, V, cluster, where, shift, sign):
-    """Move and turn every sphere of the reflected clusters (rows of :func:`reflections`)."""
+    """Move and turn every sphere of the reflected clusters (rows of :func:`reflections`).
+
+    Each sphere finds its cluster's rows in a table over the labels up to the largest reflected
+    one: a binary search per sphere and axis made a late stage's reflections of one cluster of
+    250 000 spheres cost 1.4 ms each."""
     n, d = X.shape
-    keys = where[:, 0] * d + where[:, 1]  # ascending: the rows are sorted by (cluster, axis)
+    if where.shape[0] == 0:
+        return
+    row = np.full((where[:, 0].max() + 1) * d, -1, dtype=np.int64)  # per (cluster, axis), -1: not reflected
+    for r in range(where.shape[0]):
+        row[where[r, 0] * d + where[r, 1]] = r
     for i in range(n):
-        for a in range(d):
-            r = np.searchsorted(keys, cluster[i] * d + a)
-            if r < keys.shape[0] and keys[r] == cluster[i] * d + a:
-                X[i, a] += shift[r]
-                V[i, a] = sign[r] * abs(V[i, a])
+        if cluster[i] * d < row.shape[0]:
+            for a in range(d):
+                r = row[cluster[i] * d + a]
+                if r >= 0:
+                    X[i, a] += shift[r]
+                    V[i, a] = sign[r] * abs(V[i, a])
 
 
 @jit
