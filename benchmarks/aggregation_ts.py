@@ -3,15 +3,19 @@
 Setup of Degond et al. 2024, Table 1: d = 2, R = 0.2, m = 1, L = sqrt(N pi / V_f) R,
 spheres on the square lattice, isotropic velocities |V| = 1 (eq. 4.3).  The time-stepping
 method (TS, almost-rigid, DAHA defaults) uses dt(0) = 0.005 L / max|V| (Delta t_1 of
-Table 1); the event-driven method (ED) runs on the same initial conditions.  One core
-(numba kernels are serial).  Numba compilation is excluded: a run of each method at
-N = 1600 and each V_f warms the kernels up first.
+Table 1); the event-driven method (ED) runs on the same initial conditions.  The default
+sizes are the N of Table 1 up to 90 000 (the paper's Figure 6 also has 250 000 and, at
+V_f 0.3, 10^6).  One core (numba kernels are serial).  Numba compilation is excluded: a run
+of each method at N = 1600 and each V_f warms the kernels up first.
 
 Prints, per (method, V_f, N), the mean wall and CPU time over the realizations (CPU time
 is the better measure when other processes share the cores), time steps (TS) or events
-(ED), DAHA minimisations and iterations (TS), then the least-squares exponents of wall
-and CPU time vs N over N >= 1000 per (method, V_f), and the CPU exponent between the two
-largest N, next to the paper's TS exponents.
+(ED), DAHA minimisations and iterations (TS), then per (method, V_f) the least-squares
+exponents of wall and CPU time vs N over N >= 1000, of CPU time over N >= 10^4, and the CPU
+exponent between the two largest N, next to the paper's TS exponents.  Below about 10^4 a TS
+run costs mostly per time step (0.05 s at N = 100, 0.2 s at 2500), which flattens a fit that
+reaches down there: at V_f 0.3 the fit over 2500 ... 10^6 gives 1.25, over 10^4 ... 10^6 1.32
+(docs/benchmarks.md, session 17).
 Once a run of a (method, V_f) takes longer than --max-seconds, its larger N are skipped.
 
     python benchmarks/aggregation_ts.py [--sizes 100 400 1600] [--fractions 0.2] [--methods ts ed]
@@ -39,6 +43,8 @@ from parsim.core.ts import MinimiserFailure, simulate_ts  # noqa: E402
 RADIUS = 0.2
 TIME_STEP_FACTOR = 0.005  # Delta t_1 of Table 1
 FIT_MIN_N = 1000
+#: The fit above the sizes where a TS run's cost is mostly per time step (module docstring).
+UPPER_FIT_MIN_N = 10_000
 #: Warm-up size: its first steps hold over 10^3 interacting spheres, so the tiled paths compile too.
 WARM_UP_N = 1600
 PAPER_TS_EXPONENTS = {0.1: 1.22, 0.2: 1.25, 0.3: 1.29}  # Degond et al. 2024, TS, d = 2
@@ -70,7 +76,7 @@ def run(method, n, volume_fraction, seed, realization):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[100, 400, 1600, 6400, 25600, 102400])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[100, 400, 900, 2500, 10_000, 40_000, 90_000])
     parser.add_argument("--fractions", type=float, nargs="+", default=[0.1, 0.2, 0.3])
     parser.add_argument("--realizations", type=int, default=1)
     parser.add_argument("--seed", type=int, default=1)
@@ -110,20 +116,27 @@ def main(argv=None):
                 if max(w for w, _, _ in runs) > args.max_seconds:
                     stopped.add((method, vf))
 
-    print(f"\nleast-squares exponents of wall and CPU time vs N (N >= {FIT_MIN_N})")
+    print(f"\nleast-squares exponents of wall and CPU time vs N (N >= {FIT_MIN_N}), of CPU time over "
+          f"N >= {UPPER_FIT_MIN_N}, and of CPU time between the two largest N")
     for (method, vf), by_n in times.items():
-        big = {n: t for n, t in by_n.items() if n >= FIT_MIN_N}
         paper = PAPER_TS_EXPONENTS.get(vf)
         paper = f"{paper:.2f}" if paper is not None else "-"
-        if len(big) >= 2:
-            wall, cpu = np.polyfit(np.log(list(big)), np.log(list(big.values())), 1)[0]
-            (n1, (_, cpu1)), (n2, (_, cpu2)) = sorted(big.items())[-2:]
-            top = math.log(cpu2 / cpu1) / math.log(n2 / n1)  # where the curve is steepest
-            print(f"{method:>6} V_f = {vf:.2f}: wall {wall:.2f}, CPU {cpu:.2f}, CPU from N = {n1} to {n2}: "
-                  f"{top:.2f}   (paper TS: {paper})")
-        else:
+        big = {n: t for n, t in by_n.items() if n >= FIT_MIN_N}
+        if len(big) < 2:
             print(f"{method:>6} V_f = {vf:.2f}: needs at least two sizes with N >= {FIT_MIN_N}   (paper TS: {paper})")
+            continue
+        wall, cpu = _exponents(big)
+        upper = {n: t for n, t in big.items() if n >= UPPER_FIT_MIN_N}
+        upper = f"{_exponents(upper)[1]:.2f}" if len(upper) >= 2 else "-"
+        (n1, (_, cpu1)), (n2, (_, cpu2)) = sorted(big.items())[-2:]
+        top = math.log(cpu2 / cpu1) / math.log(n2 / n1)  # where the curve is steepest
+        print(f"{method:>6} V_f = {vf:.2f}: wall {wall:.2f}, CPU {cpu:.2f}, CPU over N >= {UPPER_FIT_MIN_N}: {upper}, "
+              f"CPU from N = {n1} to {n2}: {top:.2f}   (paper TS: {paper})")
 
+
+def _exponents(by_n):
+    """Least-squares exponents of the mean wall and CPU times ``by_n`` (N -> (wall, CPU)) vs N."""
+    return np.polyfit(np.log(list(by_n)), np.log(list(by_n.values())), 1)[0]
 
 if __name__ == "__main__":
     main()
