@@ -10,7 +10,7 @@ import xarray as xr
 from parsim.comparison import markdown, method_comparison
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
 from parsim.core.ts import DahaParameters, daha, simulate_ts, stepper, tiles
-from parsim.core.ts.clusters import apply_reflections, free_flight, reflections
+from parsim.core.ts.clusters import apply_reflections, free_flight, overruns, reflections, translate
 from parsim.core.ts.contacts import cross_cluster_contacts
 from parsim.core.ts.daha import FULL_SWEEP_EVERY, attraction_energy, minimise
 from parsim.core.ts.links import LinkSet
@@ -245,6 +245,26 @@ def test_a_cluster_past_a_wall_is_mirrored_back_as_a_whole():
     assert V.tolist() == [[-1.0, 0.5], [-1.0, 0.5], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]
     where, _ = free_flight(np.full((9, 2), 9.5), np.ones((9, 2)), np.ones(9), np.arange(9), 10.0, 0.25)
     assert where.tolist() == [[i, a] for i in range(9) for a in range(2)]  # every disc past two walls
+
+
+def test_a_flight_searched_for_overruns_among_some_rows_is_the_free_flight():
+    """``translate`` then ``overruns`` over rows holding every sphere past a wall (the stepper's
+    wall rows of a late stage) give the positions and the reflections of ``free_flight``."""
+    rng = np.random.default_rng(3)
+    X = rng.uniform(0.5, 9.5, (200, 2))
+    V = rng.normal(size=(200, 2))
+    R = np.full(200, 0.25)
+    cluster = rng.integers(0, 7, 200)
+    flown = X.copy()
+    where, extent = free_flight(flown, V, R, cluster, 10.0, 0.4)
+    assert where.shape[0] > 0
+    translated = X.copy()
+    translate(translated, V, 0.4)
+    assert np.array_equal(translated, flown)
+    past = np.flatnonzero(((translated - R[:, None] < 0.0) | (translated + R[:, None] > 10.0)).any(axis=1))
+    rows = np.union1d(past, rng.choice(200, 20, replace=False))  # the spheres past a wall, and some others
+    for a, b in zip(reflections(where, extent, 10.0), reflections(*overruns(translated, R, cluster, 10.0, rows), 10.0)):
+        assert np.array_equal(a, b)
 
 
 def test_merges_conserve_momentum_away_from_walls():

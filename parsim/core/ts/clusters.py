@@ -29,13 +29,29 @@ def free_flight(X, V, R, cluster, box_length, duration):
             X[i, a] += duration * V[i, a]
             if X[i, a] - R[i] < 0.0 or X[i, a] + R[i] > box_length:
                 count += 1
+    return _overruns(X, R, cluster, box_length, np.arange(n if count else 0), count)
+
+
+@jit
+def overruns(X, R, cluster, box_length, rows):
+    """The rows of :func:`free_flight` for the spheres ``rows`` only, which must hold every
+    sphere that can be past a wall (after a flight by :func:`translate`)."""
+    count = 0
+    for i in rows:
+        for a in range(X.shape[1]):
+            if X[i, a] - R[i] < 0.0 or X[i, a] + R[i] > box_length:
+                count += 1
+    return _overruns(X, R, cluster, box_length, rows, count)
+
+
+@jit
+def _overruns(X, R, cluster, box_length, rows, count):
+    """The rows of :func:`free_flight` for the ``count`` spheres and axes of ``rows`` past a wall."""
     where = np.empty((count, 2), dtype=np.int64)
     extent = np.empty((count, 2))
-    if count == 0:
-        return where, extent
     count = 0
-    for i in range(n):
-        for a in range(d):
+    for i in rows:
+        for a in range(X.shape[1]):
             low, high = X[i, a] - R[i], X[i, a] + R[i]
             if low < 0.0 or high > box_length:
                 where[count, 0] = cluster[i]

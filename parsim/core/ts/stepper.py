@@ -63,7 +63,7 @@ import numpy as np
 
 from parsim.core.celllist import grid_size
 from parsim.core.ts.clusters import (apply_reflections, cluster_momenta, free_flight, involved_spheres, merge_clusters,
-                                     reflections, set_cluster_velocities, translate)
+                                     overruns, reflections, set_cluster_velocities, translate)
 from parsim.core.ts.contacts import (check_discs_or_spheres, cross_cluster_contacts, cross_cluster_pairs,
                                     unlinked_contacts)
 from parsim.core.ts.daha import DahaParameters, minimise
@@ -233,7 +233,13 @@ class _Run:
     def advect(self, dt):
         """Step 1: free flight, then the whole-cluster wall reflection; returns the reflections made."""
         flight = dt * self.closing() if self.watch is not None else 0.0  # at the velocities of the flight
-        where, extent = free_flight(self.X, self.V, self.R, self.own_cluster, self.L, dt)
+        largest = self._largest_cluster()
+        if largest.holds_most:  # only its outermost spheres and those outside it can reach a wall
+            wall_rows = largest.wall_rows(self.X, self.R, self.L)
+            translate(self.X, self.V, dt)
+            where, extent = overruns(self.X, self.R, self.own_cluster, self.L, wall_rows)
+        else:
+            where, extent = free_flight(self.X, self.V, self.R, self.own_cluster, self.L, dt)
         where, shift, sign = reflections(self.domain.gather(where), self.domain.gather(extent), self.L)
         if shift.size:
             apply_reflections(self.X, self.V, self.own_cluster, where, shift, sign)
