@@ -29,13 +29,14 @@ def free_flight(X, V, R, cluster, box_length, duration):
             X[i, a] += duration * V[i, a]
             if X[i, a] - R[i] < 0.0 or X[i, a] + R[i] > box_length:
                 count += 1
-    return _overruns(X, R, cluster, box_length, np.arange(n if count else 0), count)
+    return _overruns(X, R, cluster, box_length, np.arange(n if count else 0), count)  # no rows if none past
 
 
 @jit
 def overruns(X, R, cluster, box_length, rows):
-    """The rows of :func:`free_flight` for the spheres ``rows`` only, which must hold every
-    sphere that can be past a wall (after a flight by :func:`translate`)."""
+    """The rows of :func:`free_flight` for the spheres ``rows`` only, after a flight by
+    :func:`translate`.  The reflections (:func:`reflections`) are those of all spheres if
+    ``rows`` hold the spheres of each cluster farthest out along each axis."""
     count = 0
     for i in rows:
         for a in range(X.shape[1]):

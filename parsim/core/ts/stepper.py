@@ -233,9 +233,9 @@ class _Run:
     def advect(self, dt):
         """Step 1: free flight, then the whole-cluster wall reflection; returns the reflections made."""
         flight = dt * self.closing() if self.watch is not None else 0.0  # at the velocities of the flight
-        largest = self._largest_cluster()
-        if largest.holds_most:  # only its outermost spheres and those outside it can reach a wall
-            wall_rows = largest.wall_rows(self.X, self.R, self.L)
+        largest = self._largest  # as the look-aheads left it: not made again after every merge
+        if largest.holds_most and largest.holds(self.cluster, self.global_id):
+            wall_rows = largest.wall_rows(self.X, self.R, self.L)  # the only rows that can reach a wall first
             translate(self.X, self.V, dt)
             where, extent = overruns(self.X, self.R, self.own_cluster, self.L, wall_rows)
         else:
