@@ -138,5 +138,6 @@ def _exponents(by_n):
     """Least-squares exponents of the mean wall and CPU times ``by_n`` (N -> (wall, CPU)) vs N."""
     return np.polyfit(np.log(list(by_n)), np.log(list(by_n.values())), 1)[0]
 
+
 if __name__ == "__main__":
     main()

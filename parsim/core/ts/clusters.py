@@ -37,19 +37,15 @@ def overruns(X, R, cluster, box_length, rows):
     """The rows of :func:`free_flight` for the spheres ``rows`` only, after a flight by
     :func:`translate`.  The reflections (:func:`reflections`) are those of all spheres if
     ``rows`` hold the spheres of each cluster farthest out along each axis."""
-    count = 0
-    for i in rows:
-        for a in range(X.shape[1]):
-            if X[i, a] - R[i] < 0.0 or X[i, a] + R[i] > box_length:
-                count += 1
-    return _overruns(X, R, cluster, box_length, rows, count)
+    return _overruns(X, R, cluster, box_length, rows, rows.shape[0] * X.shape[1])
 
 
 @jit
-def _overruns(X, R, cluster, box_length, rows, count):
-    """The rows of :func:`free_flight` for the ``count`` spheres and axes of ``rows`` past a wall."""
-    where = np.empty((count, 2), dtype=np.int64)
-    extent = np.empty((count, 2))
+def _overruns(X, R, cluster, box_length, rows, most):
+    """The rows of :func:`free_flight` for the spheres and axes of ``rows`` past a wall, at
+    most ``most`` of them."""
+    where = np.empty((most, 2), dtype=np.int64)
+    extent = np.empty((most, 2))
     count = 0
     for i in rows:
         for a in range(X.shape[1]):
@@ -60,7 +56,7 @@ def _overruns(X, R, cluster, box_length, rows, count):
                 extent[count, 0] = low if low < 0.0 else np.inf
                 extent[count, 1] = high if high > box_length else -np.inf
                 count += 1
-    return where, extent
+    return where[:count], extent[:count]
 
 
 @jit
