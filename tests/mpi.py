@@ -2,8 +2,10 @@
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 
@@ -24,3 +26,55 @@ def run_mpi(arguments: list[str], ranks: int = 2, timeout: float = 600, cwd=None
 def parsim_command(*arguments: str) -> list[str]:
     """Arguments that run the parsim command line with the test interpreter."""
     return ["-m", "parsim.cli", *arguments]
+
+
+def run_mpi_bounded(arguments: list[str], bound: float, ranks: int = 2, cwd=None):
+    """Run ``python ARGUMENTS`` on ``ranks`` ranks in a session of its own; ``(process, seconds)``.
+
+    A run still going after ``bound`` seconds is a hang: every process of the session is
+    killed (mpiexec and the ranks it started) and the test fails, so a hung job cannot
+    outlive the test that found it.
+    """
+    command = [mpiexec(), "-n", str(ranks), sys.executable, *arguments]
+    start = time.monotonic()
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd,
+                               start_new_session=True)
+    try:
+        stdout, stderr = process.communicate(timeout=bound)
+    except subprocess.TimeoutExpired:
+        kill_session(process)
+        stdout, stderr = process.communicate()
+        raise AssertionError(f"still running after {bound} s (a hang); stderr:\n{stderr}") from None
+    return subprocess.CompletedProcess(command, process.returncode, stdout, stderr), time.monotonic() - start
+
+
+def kill_session(process: subprocess.Popen) -> None:
+    """SIGKILL every process of the session that ``process`` leads (mpiexec, its proxies and ranks)."""
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    for pid in _session_members(process.pid):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    process.wait()
+
+
+def _session_members(session: int) -> list[int]:
+    """PIDs whose session is ``session`` (hydra puts its proxies in process groups of their own)."""
+    members = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[3]) == session:  # field 6 of /proc/PID/stat: the session id
+            members.append(int(stat.parent.name))
+    return members
+
+
+def error_lines(stderr: str) -> list[str]:
+    """The lines parsim printed on standard error, without the MPI library's own abort notice."""
+    return [line for line in stderr.splitlines() if line.strip() and not line.startswith("Abort(")]
