@@ -3,24 +3,27 @@
     parsim run JOB [--output DIR] [--quiet] [--ranks-per-task K]
                                               run (or resume) a job, on one rank or under mpiexec;
                                               K ranks run each task together (default 1)
-    parsim validate JOB                       check a job file, compute nothing
+    parsim validate JOB [--output DIR]        check a job file and its output location, compute nothing
     parsim info OUTPUT                        what an output folder holds and how far its job got
     parsim plot OUTPUT [--figure NAME] [--out PATH] [--task LABEL]
                                               the papers' figures from a job's outputs, PNG and PDF
                                               (default: every figure the dataset supports, in OUTPUT/figures)
 
-Errors a user can cause are printed as one line, without a traceback, with a
-non-zero exit status.
+Errors a user can cause are printed as one line, without a traceback: exit
+status 2 for a job that cannot run as written (checked before anything is
+computed), 1 for a failure while it runs (a task, a full disk).  Under
+mpiexec, rank 0 prints the line and every rank ends; an unexpected failure on
+one rank alone aborts the whole job.
 """
 
 import argparse
 import sys
 from pathlib import Path
 
-from parsim.errors import ParsimError
+from parsim.errors import JobError, ParsimError, describe_exception
 
 EXIT_USER_ERROR = 2
-EXIT_TASK_FAILED = 1
+EXIT_RUN_FAILED = 1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -36,8 +39,9 @@ def main(argv: list[str] | None = None) -> int:
                           "time-stepping aggregation tasks are decomposed over the group, other tasks run on "
                           "the group's first rank while the others wait")
 
-    validate = commands.add_parser("validate", help="check a job file without computing anything")
+    validate = commands.add_parser("validate", help="check a job file and its output location without computing")
     validate.add_argument("job", type=Path)
+    validate.add_argument("--output", type=Path, help="output folder (overrides the job's 'output')")
 
     info = commands.add_parser("info", help="describe an output folder")
     info.add_argument("output", type=Path, help="output folder of a job")
@@ -53,35 +57,55 @@ def main(argv: list[str] | None = None) -> int:
                       help="the task the pictures show (sediment, cluster), e.g. p0003_r0001; default: the first")
 
     args = parser.parse_args(argv)
+    if args.command == "run":
+        return _run(args)
     try:
-        return {"run": _run, "validate": _validate, "info": _info, "plot": _plot}[args.command](args)
+        return {"validate": _validate, "info": _info, "plot": _plot}[args.command](args)
     except ParsimError as error:
-        _print_error(str(error))
+        print(f"parsim: error: {error}", file=sys.stderr)
         return EXIT_USER_ERROR
 
 
 def _run(args) -> int:
+    """``parsim run`` on every rank: rank 0 reads the job and hands it out, then all ranks run it.
+
+    A ParsimError reaches every rank alike (rank 0's phases hand theirs to all
+    ranks), so rank 0 prints it and all ranks return its status.  Any other
+    exception happened on one rank alone: that rank prints it and aborts the job.
+    """
+    from mpi4py import MPI
+
     from parsim.job import load_job
-    from parsim.parallel.scheduler import TaskFailed
+    from parsim.parallel.collective import FailedOnRoot, abort_job, on_root
     from parsim.runner import run_job
     from parsim.solvers import SOLVERS
 
-    job = load_job(args.job, SOLVERS, output=args.output)
+    comm = MPI.COMM_WORLD
     try:
-        path = run_job(job, progress=not args.quiet, ranks_per_task=args.ranks_per_task)
-    except TaskFailed as failure:
-        _print_error(str(failure))
-        return EXIT_TASK_FAILED
-    if _is_rank_zero():
+        job = on_root(comm, lambda: load_job(args.job, SOLVERS, output=args.output))
+        path = run_job(job, comm, progress=not args.quiet, ranks_per_task=args.ranks_per_task)
+    except FailedOnRoot:
+        return EXIT_RUN_FAILED  # rank 0 has printed its traceback
+    except ParsimError as error:
+        if comm.Get_rank() == 0:
+            print(f"parsim: error: {error}", file=sys.stderr)
+        return EXIT_USER_ERROR if isinstance(error, JobError) else EXIT_RUN_FAILED
+    except Exception as error:  # noqa: BLE001 - one rank's failure must not leave the others waiting
+        if comm.Get_size() == 1:
+            raise
+        abort_job(comm, f"rank {comm.Get_rank()} failed: {describe_exception(error)}", EXIT_RUN_FAILED)
+    if comm.Get_rank() == 0:
         print(f"dataset: {path}")
     return 0
 
 
 def _validate(args) -> int:
     from parsim.job import load_job
+    from parsim.output.location import check_output_location
     from parsim.solvers import SOLVERS
 
-    job = load_job(args.job, SOLVERS)
+    job = load_job(args.job, SOLVERS, output=args.output)
+    check_output_location(job.output)
     print(f"{args.job}: valid {job.kind} job '{job.name}': {job.n_points} parameter points x "
           f"{job.realizations} realizations = {len(job.tasks())} tasks, output in {job.output}")
     return 0
@@ -99,17 +123,6 @@ def _plot(args) -> int:
 
     plot_output(args.output, figure=args.figure, out=args.out, task=args.task)
     return 0
-
-
-def _is_rank_zero() -> bool:
-    from mpi4py import MPI
-
-    return MPI.COMM_WORLD.Get_rank() == 0
-
-
-def _print_error(message: str) -> None:
-    if _is_rank_zero():
-        print(f"parsim: error: {message}", file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -8,7 +8,14 @@
   it happened in and is never silently accepted.
 - :class:`PlotError`: ``parsim plot`` was asked for a figure that the job's
   outputs cannot give (a missing variable or task file); reported like a JobError.
+- :class:`OutputError`: an output file or folder could not be written or read
+  (a full disk, a quota, a file removed under a running job); the message names
+  the path.
 """
+
+import errno
+import traceback
+from pathlib import Path
 
 
 class ParsimError(Exception):
@@ -25,3 +32,23 @@ class NumericalError(ParsimError):
 
 class PlotError(ParsimError):
     """A figure the outputs cannot give; the message names the missing variable, dimension or file."""
+
+
+class OutputError(ParsimError):
+    """A file of the outputs that cannot be written or read; the message names the path."""
+
+    @classmethod
+    def from_os_error(cls, error: OSError, path: Path | str, doing: str = "write") -> "OutputError":
+        """The one-line report of ``error``, met while doing ``doing`` on ``path``."""
+        if error.errno == errno.ENOSPC:
+            return cls(f"no space left on {path}")
+        if error.errno == errno.EDQUOT:
+            return cls(f"disk quota exceeded on {path}")
+        return cls(f"cannot {doing} {path}: {error.strerror or error}")
+
+
+def describe_exception(error: BaseException) -> str:
+    """A ParsimError's message alone; any other exception with its traceback (a bug, to be reported)."""
+    if isinstance(error, ParsimError):
+        return str(error)
+    return "".join(traceback.format_exception(error)).rstrip()

@@ -1,10 +1,15 @@
 """Turn a job into tasks, run them over the MPI ranks, and assemble the dataset.
 
-Every rank calls :func:`run_job`.  Rank 0 prepares the output folder and finds
-the tasks that earlier runs have not finished; the scheduler hands those out,
-costliest first; each task's rank writes its HDF5 file; rank 0 then assembles
-the netCDF dataset from the task files, so a resumed job gives exactly the
-dataset of an uninterrupted one.
+Every rank calls :func:`run_job`.  Rank 0 checks the output location, locks
+the output folder, prepares it and finds the tasks that earlier runs have not
+finished; the scheduler hands those out, costliest first; each task's rank
+writes its HDF5 file; rank 0 then assembles the netCDF dataset from the task
+files, so a resumed job gives exactly the dataset of an uninterrupted one.
+
+Failures end every rank: the phases of rank 0 alone go through
+:func:`~parsim.parallel.collective.on_root`, which hands their error to every
+rank, and a failed task aborts the job from the scheduler.  SIGINT, SIGTERM
+and SIGHUP end the run at once with one line saying how many tasks are kept.
 
 With ``ranks_per_task = K > 1`` the ranks form groups of K consecutive ranks
 that run one task at a time together: a decomposable solver gets the group's
@@ -12,21 +17,29 @@ communicator, any other solver runs on the group's rank 0 while the other
 ranks wait.  The group's rank 0 writes the task file.
 """
 
+import signal
+import sys
 import time
-import traceback
 from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
-from parsim.errors import JobError, ParsimError
-from parsim.job import Job, parse_job
+from parsim.errors import JobError, describe_exception
+from parsim.interrupts import ending_on_signals
+from parsim.job import Job, Task, parse_job
 from parsim.output.dataset import build_dataset, write_dataset
 from parsim.output.folder import OutputFolder
+from parsim.output.location import check_output_location
+from parsim.output.lock import FolderLock
 from parsim.output.snapshot import read_statistics, write_task_file
+from parsim.parallel.collective import on_root
 from parsim.parallel.scheduler import run_group_tasks
 from parsim.progress import TaskProgress
 from parsim.solvers import SOLVERS
+
+#: How long a rank other than 0 waits, after a signal, for rank 0 to end the job before it aborts it itself.
+SIGNAL_GRACE_SECONDS = 2.0
 
 
 def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ranks_per_task: int = 1) -> Path:
@@ -34,22 +47,41 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
     _check_ranks_per_task(ranks_per_task, comm.Get_size())
     solver = SOLVERS[job.kind]
     folder = OutputFolder(job.output, job.name)
+    lock = FolderLock(folder.root)
     rank = comm.Get_rank()
 
-    pending = None
-    if rank == 0:
-        try:
-            folder.prepare(job, _stored_job(folder))
-            pending = [task for task in job.tasks() if not folder.is_finished(task)]
-        except ParsimError as error:
-            pending = error
-    pending = comm.bcast(pending, root=0)
-    if isinstance(pending, ParsimError):
-        raise pending
-    # Costliest first, so that the last tasks to start are short and no rank idles at the end.
-    pending.sort(key=lambda task: -solver.cost(job.point_parameters(task.point)))
+    try:
+        with ending_on_signals(lambda number: _end_on_signal(number, job, folder, lock, comm)):
+            pending = on_root(comm, lambda: _claim(job, folder, lock))
+            _run_pending(job, pending, folder, comm, progress and rank == 0, ranks_per_task)
+            on_root(comm, lambda: _write_dataset(job, folder, comm.Get_size(), ranks_per_task))
+    finally:
+        if rank == 0:
+            lock.release()
+    return folder.dataset
 
-    bar = TaskProgress(job.name, len(job.tasks()), len(job.tasks()) - len(pending), progress and rank == 0)
+
+def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
+    """Rank 0: lock and prepare the output folder; the tasks still to run, costliest first."""
+    check_output_location(folder.root)
+    folder.create()
+    lock.acquire()
+    try:
+        folder.prepare(job, _stored_job(folder))
+        pending = [task for task in job.tasks() if not folder.is_finished(task)]
+    except BaseException:
+        lock.release()
+        raise
+    # Costliest first, so that the last tasks to start are short and no rank idles at the end.
+    solver = SOLVERS[job.kind]
+    pending.sort(key=lambda task: -solver.cost(job.point_parameters(task.point)))
+    return pending
+
+
+def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, comm: MPI.Comm, progress: bool,
+                 ranks_per_task: int) -> None:
+    solver = SOLVERS[job.kind]
+    bar = TaskProgress(job.name, len(job.tasks()), len(job.tasks()) - len(pending), progress)
 
     def work(k: int, group: MPI.Comm) -> None:
         if not solver.decomposable:
@@ -70,19 +102,32 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
 
     def describe_failure(k: int, error: Exception) -> str:
         task = pending[k]
-        reason = str(error) if isinstance(error, ParsimError) else "".join(traceback.format_exception(error)).rstrip()
-        return f"task {task.label} ({job.describe_point(task.point)}, realization {task.realization}) failed: {reason}"
+        return (f"task {task.label} ({job.describe_point(task.point)}, realization {task.realization}) failed: "
+                f"{describe_exception(error)}")
 
     run_group_tasks(comm, ranks_per_task, len(pending), work, on_finished=lambda k, r: bar.task_finished(),
                     describe_failure=describe_failure)
     bar.close()
 
-    if rank == 0:
-        dataset = build_dataset(job, solver, lambda task: read_statistics(folder.task_path(task)), comm.Get_size(),
-                                ranks_per_task)
-        write_dataset(dataset, folder.dataset)
-    comm.Barrier()
-    return folder.dataset
+
+def _write_dataset(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task: int) -> None:
+    solver = SOLVERS[job.kind]
+    dataset = build_dataset(job, solver, lambda task: read_statistics(folder.task_path(task)), mpi_size,
+                            ranks_per_task)
+    write_dataset(dataset, folder.dataset)
+
+
+def _end_on_signal(number: signal.Signals, job: Job, folder: OutputFolder, lock: FolderLock, comm: MPI.Comm) -> None:
+    """A signal's last words: rank 0 releases the lock and says what is kept; the other ranks let it end the job."""
+    if comm.Get_rank() != 0:
+        time.sleep(SIGNAL_GRACE_SECONDS)  # the launcher ends this rank when rank 0 exits
+        comm.Abort(128 + number)  # rank 0 did not get the signal: end the job from here
+        return
+    lock.release()
+    kept = sum(folder.is_finished(task) for task in job.tasks())
+    what = "interrupted" if number == signal.SIGINT else f"stopped by {number.name}"
+    print(f"\nparsim: {what}; {kept} of {len(job.tasks())} tasks kept, run the same command to finish",
+          file=sys.stderr, flush=True)
 
 
 def _check_ranks_per_task(ranks_per_task: int, n_ranks: int) -> None:

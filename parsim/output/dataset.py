@@ -16,7 +16,7 @@ import xarray as xr
 
 import parsim
 from parsim.job import Job, Task
-from parsim.output.atomic import written_atomically
+from parsim.output.atomic import write_bytes_atomically
 from parsim.solver import Solver, Statistic
 
 WALL_TIME = Statistic("wall_time", "s", "wall-clock time of the task on its rank", measured=True)
@@ -90,5 +90,5 @@ VOLATILE_ATTRIBUTES = ("history", "mpi_size", "ranks_per_task", "date_created")
 
 
 def write_dataset(dataset: xr.Dataset, path) -> None:
-    with written_atomically(path) as temporary:
-        dataset.to_netcdf(temporary, engine="netcdf4")
+    """Write ``dataset`` as netCDF-4 to ``path`` atomically; it is built in memory, then written in one piece."""
+    write_bytes_atomically(path, dataset.to_netcdf(engine="netcdf4"))

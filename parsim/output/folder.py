@@ -13,7 +13,7 @@ running the same command again computes just the missing tasks.
 
 from pathlib import Path
 
-from parsim.errors import JobError
+from parsim.errors import JobError, OutputError
 from parsim.job import Job, Task
 from parsim.output.atomic import TEMPORARY_SUFFIX, written_atomically
 
@@ -33,6 +33,13 @@ class OutputFolder:
 
     def is_finished(self, task: Task) -> bool:
         return self.task_path(task).exists()
+
+    def create(self) -> None:
+        """Make the folder and its ``tasks`` folder; a failure is an :class:`OutputError` naming the path."""
+        try:
+            self.tasks.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise OutputError.from_os_error(error, self.tasks, doing="create") from None
 
     def prepare(self, job: Job, stored_job: Job | None) -> None:
         """Create the folder for ``job``, or check that it holds the same job; remove stale temporaries.

@@ -13,8 +13,10 @@ consecutive ranks that run each task together.  The group leaders share the
 tasks out as above and send each index they take to the rest of their group;
 a rank waiting for its leader sleeps between polls, so it frees its core.
 
-Failure: an exception in a task on any rank prints that rank's message and
-calls ``MPI_Abort``, which ends every rank at once; no rank waits forever
+Failure: an exception in a task on any rank ends every rank at once through
+``MPI_Abort``, after the message of the first failing rank is printed (several
+ranks failing together print one message: see
+:class:`~parsim.parallel.collective.FailureReport`); no rank waits forever
 (with groups, the abort is on the whole communicator, whichever rank of a
 group failed).
 Files of tasks already finished are complete on disk (they are written under a
@@ -22,24 +24,23 @@ temporary name and renamed), so nothing finished is lost.  On a single rank the
 exception is raised as :class:`TaskFailed` instead.
 """
 
-import sys
 import threading
 import time
-import traceback
 from typing import Callable
 
 import numpy as np
 from mpi4py import MPI
 
+from parsim.errors import ParsimError, describe_exception
+from parsim.parallel.collective import FailureReport, wait_for
+
 REQUEST_TAG = 1
 REPLY_TAG = 2
 NO_MORE_TASKS = -1
-#: Pause between printing a failure and MPI_Abort: without it mpiexec lost the message in 1 of 8 runs.
-ABORT_GRACE_SECONDS = 0.5
-POLL_SECONDS = 1e-3  # how often rank 0's server thread looks for requests, and a group member for its next task
+POLL_SECONDS = 1e-3  # how often rank 0's server thread looks for requests
 
 
-class TaskFailed(Exception):
+class TaskFailed(ParsimError):
     """A task raised; the message says which task, on which rank, and why."""
 
 
@@ -84,23 +85,28 @@ def run_tasks(
             with finished_lock:
                 on_finished(k, rank)
 
-    def run_one(k: int) -> None:
-        try:
-            work(k)
-        except Exception as error:  # noqa: BLE001 - every failure must end the job with its message
-            _fail(comm, f"{describe_failure(k, error)} (on rank {comm.Get_rank()})")
-
     if comm.Get_size() == 1:
         for k in range(n_tasks):
-            run_one(k)
+            try:
+                work(k)
+            except Exception as error:  # noqa: BLE001 - raised with the task's description
+                raise TaskFailed(describe_failure(k, error)) from error
             finished(k, 0)
         return
 
     sched = comm.Dup()  # private tags: the scheduler never sees other messages
+    report = FailureReport(sched)
+
+    def run_one(k: int) -> None:
+        try:
+            work(k)
+        except Exception as error:  # noqa: BLE001 - every failure must end the job with its message
+            report.fail(f"{describe_failure(k, error)} (on rank {comm.Get_rank()})")
+
     try:
         if sched.Get_rank() == 0:
             counter = _TaskCounter(n_tasks)
-            server = threading.Thread(target=_serve, args=(sched, counter, finished), daemon=True)
+            server = threading.Thread(target=_serve, args=(sched, counter, finished, report), daemon=True)
             server.start()
             while (k := counter.take()) != NO_MORE_TASKS:
                 run_one(k)
@@ -116,6 +122,7 @@ def run_tasks(
                 run_one(k)
                 done = k
     finally:
+        report.free()
         sched.Free()
 
 
@@ -145,12 +152,13 @@ def run_group_tasks(
     group = comm.Split(color=rank // ranks_per_task, key=rank)
     leading = group.Get_rank() == 0
     leaders = comm.Split(color=0 if leading else MPI.UNDEFINED, key=rank)
+    report = FailureReport(comm)
 
     def run_in_group(k: int) -> None:
         try:
             work(k, group)
         except Exception as error:  # noqa: BLE001 - the other ranks of the group would wait forever
-            _fail(comm, f"{describe_failure(k, error)} (on rank {rank})")
+            report.fail(f"{describe_failure(k, error)} (on rank {rank})")
 
     def lead(k: int) -> None:
         _send_task(group, k)
@@ -164,6 +172,7 @@ def run_group_tasks(
             while (k := _receive_task(group)) != NO_MORE_TASKS:
                 run_in_group(k)
     finally:
+        report.free()
         group.Free()
         if leaders != MPI.COMM_NULL:
             leaders.Free()
@@ -178,13 +187,12 @@ def _send_task(group: MPI.Comm, k: int) -> None:
 def _receive_task(group: MPI.Comm) -> int:
     """The next task index from the group's leader; polls and sleeps instead of spinning in a blocking call."""
     index = np.empty(1, dtype=np.int64)
-    request = group.Ibcast(index, root=0)
-    while not request.Test():
-        time.sleep(POLL_SECONDS)
+    wait_for(group.Ibcast(index, root=0))
     return int(index[0])
 
 
-def _serve(sched: MPI.Comm, counter: _TaskCounter, finished: Callable[[int, int], None]) -> None:
+def _serve(sched: MPI.Comm, counter: _TaskCounter, finished: Callable[[int, int], None],
+           report: FailureReport) -> None:
     """Rank 0's server thread: answer each request with the next task, until every rank is told to stop."""
     try:
         still_asking = sched.Get_size() - 1
@@ -202,17 +210,9 @@ def _serve(sched: MPI.Comm, counter: _TaskCounter, finished: Callable[[int, int]
             if k == NO_MORE_TASKS:
                 still_asking -= 1
     except Exception as error:  # noqa: BLE001 - a dead server would leave ranks waiting forever
-        _fail(sched, f"the task server on rank 0 failed: {_traceback_message(-1, error)}")
+        report.fail(f"the task server on rank 0 failed: {describe_exception(error)}")
 
 
 def _traceback_message(k: int, error: Exception) -> str:
-    return f"task {k} failed: " + "".join(traceback.format_exception(error)).rstrip()
+    return f"task {k} failed: {describe_exception(error)}"
 
-
-def _fail(comm: MPI.Comm, message: str) -> None:
-    if comm.Get_size() == 1:
-        raise TaskFailed(message)
-    sys.stdout.flush()
-    print(f"\nparsim: error: {message}", file=sys.stderr, flush=True)
-    time.sleep(ABORT_GRACE_SECONDS)  # let mpiexec forward the message before MPI_Abort kills the ranks
-    comm.Abort(1)

@@ -1,0 +1,38 @@
+"""Is a path somewhere a job can put its outputs?  Checked before anything is computed."""
+
+import os
+import tempfile
+from pathlib import Path
+
+from parsim.errors import JobError
+
+
+def check_output_location(path: Path) -> None:
+    """Raise a :class:`JobError` unless ``path`` is a folder, or can be made one, that this process can write in.
+
+    The nearest existing ancestor of ``path`` (``path`` itself if it exists)
+    must be a folder, and a file can be created in it: this catches a path
+    that is a regular file or lies below one, a read-only file system and a
+    folder without write permission.  Nothing is left behind: the probe file
+    is removed and no folder is created.
+    """
+    path = Path(path)
+    existing = _nearest_existing(path)
+    if not existing.is_dir():
+        what = f"{path} is a file" if existing == path else f"{existing} is a file, so {path} cannot be a folder"
+        raise JobError(f"output {path}: {what}; give another output folder (key 'output' or option --output)")
+    try:
+        descriptor, probe = tempfile.mkstemp(prefix=".parsim-probe-", dir=existing)
+    except OSError as error:
+        raise JobError(f"output {path}: {existing} is not writable ({error.strerror}); "
+                       f"give another output folder (key 'output' or option --output)") from None
+    os.close(descriptor)
+    os.unlink(probe)
+
+
+def _nearest_existing(path: Path) -> Path:
+    """``path`` or its nearest ancestor that exists (the working directory for a relative path)."""
+    candidate = path
+    while not candidate.exists() and candidate.parent != candidate:
+        candidate = candidate.parent
+    return candidate if candidate.exists() else Path.cwd()
