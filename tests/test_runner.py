@@ -1,6 +1,7 @@
 """Jobs end to end: the same dataset on 1 and 2 ranks, after a kill and resume, and the file layouts."""
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -13,7 +14,7 @@ import pytest
 import xarray as xr
 
 from tests.datasets import reproducible_part, run_serial
-from tests.mpi import mpiexec, parsim_command, run_mpi
+from tests.mpi import error_lines, kill_session, mpiexec, parsim_command, run_mpi
 
 QUICKSTART = "jobs/quickstart.toml"
 
@@ -99,3 +100,71 @@ def test_resume_refuses_a_different_job(tmp_path):
     assert result.returncode == 2 and "differs in: seed" in result.stderr
     info = run_serial("info", str(tmp_path / "out"))
     assert info.returncode == 0 and "tasks finished: 3 of 3" in info.stdout and "fractal_dimension" in info.stdout
+
+
+def wait_for_task_files(tasks: Path, count: int, process: subprocess.Popen, seconds: float = 300) -> None:
+    deadline = time.monotonic() + seconds
+    while len(list(tasks.glob("*.h5"))) < count and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.01)
+
+
+@pytest.mark.mpi
+def test_ctrl_c_ends_every_rank_with_one_line_and_resumes(quickstart_two_ranks, tmp_path):
+    # Ctrl-C in a terminal signals mpiexec, which forwards SIGINT to every rank.
+    command = [mpiexec(), "-n", "2", sys.executable, *parsim_command("run", QUICKSTART, "--output", str(tmp_path), "--quiet")]
+    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    wait_for_task_files(tmp_path / "tasks", 3, process)
+    interrupted = time.monotonic()
+    process.send_signal(signal.SIGINT)
+    try:
+        _, stderr = process.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        kill_session(process)
+        raise AssertionError("the ranks did not end within 30 s of Ctrl-C") from None
+    assert time.monotonic() - interrupted < 10
+    lines = [line for line in error_lines(stderr) if not line.startswith("[mpiexec@")]  # the launcher's own notice
+    assert process.returncode == 130, stderr
+    assert len(lines) == 1 and "Traceback" not in stderr, stderr
+    kept = len(list((tmp_path / "tasks").glob("*.h5")))
+    assert lines[0] == f"parsim: interrupted; {kept} of 36 tasks kept, run the same command to finish"
+    assert 3 <= kept < 36, "the interrupt should land in the middle of the job"
+    assert not (tmp_path / "parsim.lock").exists()
+
+    result = run_mpi(parsim_command("run", QUICKSTART, "--output", str(tmp_path), "--quiet"))
+    assert result.returncode == 0, result.stderr
+    xr.testing.assert_identical(reproducible_part(tmp_path / "quickstart.nc"),
+                                reproducible_part(quickstart_two_ranks / "quickstart.nc"))
+
+
+def test_sigterm_of_a_batch_system_keeps_the_finished_tasks(tmp_path):
+    command = [sys.executable, *parsim_command("run", QUICKSTART, "--output", str(tmp_path), "--quiet")]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    wait_for_task_files(tmp_path / "tasks", 2, process)
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=30)
+    kept = len(list((tmp_path / "tasks").glob("*.h5")))
+    assert process.returncode == 128 + signal.SIGTERM
+    assert error_lines(stderr) == [f"parsim: stopped by SIGTERM; {kept} of 36 tasks kept, run the same command to finish"]
+
+
+@pytest.mark.mpi
+def test_kill_while_the_dataset_is_assembled_loses_nothing(quickstart_two_ranks, tmp_path):
+    # Every task is finished, so the run goes straight to the dataset; it is killed at several moments of it.
+    reference = reproducible_part(quickstart_two_ranks / "quickstart.nc")
+    shutil.copytree(quickstart_two_ranks / "tasks", tmp_path / "tasks")
+    shutil.copy(quickstart_two_ranks / "job.toml", tmp_path / "job.toml")
+    command = [sys.executable, *parsim_command("run", QUICKSTART, "--output", str(tmp_path), "--quiet")]
+    for delay in (0.0, 0.05, 0.1, 0.2, 0.4):
+        (tmp_path / "quickstart.nc").unlink(missing_ok=True)
+        process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        while not (tmp_path / "parsim.lock").exists() and process.poll() is None:
+            time.sleep(0.001)
+        time.sleep(delay)
+        process.kill()
+        process.wait()
+        if (tmp_path / "quickstart.nc").exists():  # the kill came after the write: the dataset is whole
+            xr.testing.assert_identical(reproducible_part(tmp_path / "quickstart.nc"), reference)
+    result = run_mpi(parsim_command("run", QUICKSTART, "--output", str(tmp_path), "--quiet"))
+    assert result.returncode == 0, result.stderr
+    assert not list(tmp_path.rglob("*.tmp"))
+    xr.testing.assert_identical(reproducible_part(tmp_path / "quickstart.nc"), reference)
