@@ -45,9 +45,9 @@ Where this implementation departs from, or makes precise, the printed paper:
 * walls (and the floor under FLOOR_ROLL) pivot about the centre of the touching sphere
   (no sliding); see :mod:`.engine`.
 
-Numba caches each kernel by its own source file: after editing :mod:`.decision`,
-:mod:`.events`, :mod:`.grid` or :mod:`.rotation`, delete the ``*.nbi``/``*.nbc`` files in
-``__pycache__`` so that :func:`engine.run_deposition` is recompiled.
+The numba cache of every kernel is stamped with all of :mod:`parsim.core`'s sources (see
+:mod:`parsim.core.cache`): editing :mod:`.decision`, :mod:`.events`, :mod:`.grid` or
+:mod:`.rotation` recompiles :func:`engine.run_deposition`.
 """
 
 from typing import NamedTuple

@@ -51,8 +51,9 @@ Modules, one job each:
 - :mod:`.extents`: :func:`extent_below_com`, :func:`bounding_radius`;
 - :mod:`.checks`: the argument checks they share.
 
-Numba caches each kernel by its own source file: after editing a callee module (e.g.
-:mod:`.superellipsoid_distance`), delete the ``*.nbi``/``*.nbc`` files in ``__pycache__``.
+The numba cache of every kernel is stamped with all of :mod:`parsim.core`'s sources (see
+:mod:`parsim.core.cache`): editing a callee module (e.g. :mod:`.superellipsoid_distance`)
+recompiles its callers.
 """
 
 from parsim.core.shapes.extents import bounding_radius, extent_below_com

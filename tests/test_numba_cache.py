@@ -1,0 +1,110 @@
+"""Where numba caches parsim's kernels: a per-user folder, never the installed package."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from parsim.core.cache import CORE, _core_sources_digest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# Compile (or load) one cheap kernel in a fresh process and report what numba did.
+PROBE = """
+import json, warnings
+warnings.simplefilter("always")
+with warnings.catch_warnings(record=True) as caught:
+    from parsim.core.eventqueue import heap_new
+    times, seqs, data = heap_new(4)
+stats = heap_new.stats
+print(json.dumps({
+    "cache_path": stats.cache_path,
+    "hits": sum(stats.cache_hits.values()),
+    "misses": sum(stats.cache_misses.values()),
+    "shape": list(data.shape),
+    "warnings": [str(w.message) for w in caught],
+}))
+"""
+
+
+def probe(tmp_path, **env_overrides):
+    env = {key: value for key, value in os.environ.items()
+           if key not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "NUMBA_CACHE_LOCATOR_CLASSES",
+                          "NUMBA_DISABLE_JIT")}
+    env["HOME"] = str(tmp_path / "home")
+    env.update(env_overrides)
+    # `python -c` from the repository's root, as a developer would run it
+    done = subprocess.run([sys.executable, "-c", PROBE], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def cache_files(folder):
+    return {path: path.stat().st_mtime_ns for pattern in ("*.nbi", "*.nbc")
+            for path in Path(folder).rglob(pattern)}
+
+
+def test_per_user_folder_and_reuse(tmp_path):
+    in_package = cache_files(CORE)
+    first = probe(tmp_path, XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    user_dir = tmp_path / "xdg" / "parsim" / "numba"
+    path = Path(first["cache_path"])
+    assert path.parent.parent == user_dir  # <cpu>-<hash>/<folder>_<hash>
+    assert first["misses"] == 1 and first["shape"] == [4, 5]
+    files = cache_files(user_dir)
+    assert {p.suffix for p in files} == {".nbi", ".nbc"} and all(p.parent == path for p in files)
+    assert cache_files(CORE) == in_package  # nothing written beside the sources
+
+    second = probe(tmp_path, XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    assert second["hits"] == 1 and second["misses"] == 0
+    assert cache_files(user_dir) == files
+
+
+def test_home_without_xdg(tmp_path):
+    result = probe(tmp_path)
+    user_dir = tmp_path / "home" / ".cache" / "parsim" / "numba"
+    assert Path(result["cache_path"]).is_relative_to(user_dir)
+    assert cache_files(tmp_path / "home")
+
+
+def test_numba_cache_dir_is_honoured(tmp_path):
+    result = probe(tmp_path, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    assert Path(result["cache_path"]).parent == tmp_path / "numba"  # numba's own layout
+    assert cache_files(tmp_path / "numba")
+    assert not (tmp_path / "home").exists()
+
+
+def test_unwritable_cache_folder_does_not_crash(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")  # a folder cannot be made below a file, even by root
+    in_package = cache_files(CORE)
+    result = probe(tmp_path, XDG_CACHE_HOME=str(blocker / "cache"))
+    assert result["shape"] == [4, 5] and result["hits"] == 0
+    assert any("without caching" in message for message in result["warnings"])
+    assert cache_files(CORE) == in_package
+
+
+def test_other_numba_functions_keep_numba_defaults(tmp_path):
+    (tmp_path / "user_kernel.py").write_text(
+        "import numba\n\n@numba.njit(cache=True)\ndef plus_one(x):\n    return x + 1\n")
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); import parsim.core.jit, user_kernel; "
+            "assert user_kernel.plus_one(1) == 2; print(user_kernel.plus_one.stats.cache_path)")
+    env = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
+    env["HOME"] = str(tmp_path / "home")
+    done = subprocess.run([sys.executable, "-c", code, str(tmp_path)], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert Path(done.stdout.strip()) == tmp_path / "__pycache__"
+
+
+def test_stamp_covers_every_core_module(tmp_path):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "caller.py").write_text("x = 1\n")
+    (tmp_path / "sub" / "callee.py").write_text("y = 1\n")
+    before = _core_sources_digest(tmp_path)
+    _core_sources_digest.cache_clear()
+    (tmp_path / "sub" / "callee.py").write_text("y = 2\n")
+    assert _core_sources_digest(tmp_path) != before
+    _core_sources_digest.cache_clear()
