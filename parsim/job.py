@@ -18,6 +18,9 @@ Every key is checked against the solver's declared parameters before anything
 is computed; errors name the key and the allowed values.
 """
 
+import hashlib
+import math
+import os
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +33,12 @@ from parsim.solver import Solver
 
 TOP_LEVEL_KEYS = ("name", "kind", "seed", "realizations", "output", "parameters", "sweep")
 REQUIRED_TOP_LEVEL = ("name", "kind", "seed", "realizations")
-MAX_SEED = 2**63 - 1
+TOML_INTEGERS = (-2**63, 2**63 - 1)
+"""The integers of a TOML file (64-bit); tomllib returns larger ones too."""
+MAX_SEED = TOML_INTEGERS[1]
+MAX_TASKS = 1_000_000
+"""Tasks a job may have: each writes a file, and the job lists them all before it starts."""
+BINARY_UNITS = ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB", "ZiB", "YiB")
 
 
 @dataclass(frozen=True)
@@ -57,6 +65,7 @@ class Job:
     fixed: dict[str, Any]  # every non-swept parameter, defaults filled in
     sweep: dict[str, list]  # swept parameter -> values, in file order
     text: str  # the job file as written
+    input_hashes: dict[str, dict[str, str]]  # file parameter -> {path as written: SHA-256 of the content}
 
     @property
     def sweep_shape(self) -> tuple[int, ...]:
@@ -88,6 +97,15 @@ class Job:
         seed_point = int(np.ravel_multi_index([by_name[n] for n in seeded], shape)) if seeded else 0
         return np.random.SeedSequence(self.seed, spawn_key=(seed_point, task.realization))
 
+    @property
+    def input_attributes(self) -> dict[str, str]:
+        """The input files and their hashes as attributes of the dataset and task files.
+
+        ``input_files``: one line ``path sha256`` per file the job names (empty if none).
+        """
+        lines = [f"{path} {digest}" for files in self.input_hashes.values() for path, digest in files.items()]
+        return {"input_files": "\n".join(lines)}
+
     def describe_point(self, point: int) -> str:
         params = self.point_parameters(point)
         return ", ".join(f"{name}={params[name]!r}" for name in self.sweep) or "the single point"
@@ -97,9 +115,11 @@ def load_job(path: str | Path, solvers: dict[str, Solver], output: str | Path | 
     """Read and validate a job file; ``output`` overrides the file's output folder."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as error:
         raise JobError(f"cannot read job file {path}: {error.strerror}") from None
+    except UnicodeDecodeError:
+        raise JobError(f"{path}: not a TOML job file (not UTF-8 text)") from None
     return parse_job(text, solvers, source=str(path), output=output)
 
 
@@ -108,9 +128,13 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise JobError(f"{source}: not valid TOML: {error}") from None
+    except ValueError:  # Python converts integers of at most 4300 digits
+        raise JobError(f"{source}: not valid TOML: an integer far beyond the 64 bits of TOML integers") from None
 
     def fail(message: str):
         raise JobError(f"{source}: {message}")
+
+    _check_integers(document, "", fail)
 
     unknown = [key for key in document if key not in TOP_LEVEL_KEYS]
     if unknown:
@@ -136,13 +160,45 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
     if not isinstance(out, (str, Path)):
         fail(f"output = {out!r}: must be a string (a folder path)")
 
+    fixed, sweep = _parameters(document, solver, source, fail)
+    n_points = math.prod(len(values) for values in sweep.values())
+    if n_points * realizations > MAX_TASKS:
+        fail(f"{n_points} parameter points x {realizations} realizations = {n_points * realizations} tasks; "
+             f"allowed: at most {MAX_TASKS} tasks (each writes a file); lower realizations or the [sweep]")
+    job = Job(name=name, kind=kind, seed=seed, realizations=realizations, output=Path(out),
+              fixed=fixed, sweep=sweep, text=text, input_hashes=_input_hashes(solver, fixed, sweep, fail))
+    for point in range(job.n_points):
+        params = job.point_parameters(point)
+        try:
+            _check_memory(solver, params)  # before the solver's checks, which may build the particles
+            solver.check(params)
+        except JobError as error:
+            fail(f"sweep point {job.describe_point(point)}: {error}" if sweep else str(error))
+    return job
+
+
+def _check_integers(value: Any, where: str, fail) -> None:
+    """Refuse an integer beyond the 64 bits of TOML anywhere in ``value`` (tomllib reads any size)."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _check_integers(item, f"{where}.{key}" if where else key, fail)
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            _check_integers(item, f"{where}[{i}]", fail)
+    elif isinstance(value, int) and not TOML_INTEGERS[0] <= value <= TOML_INTEGERS[1]:
+        fail(f"{where}: an integer beyond the 64 bits of TOML integers ({TOML_INTEGERS[0]} to {TOML_INTEGERS[1]})")
+
+
+def _parameters(document: dict, solver: Solver, source: str, fail) -> tuple[dict[str, Any], dict[str, list]]:
+    """The fixed parameters (defaults filled in) and the swept ones of a job document, checked."""
     fixed_table = _table(document, "parameters", fail)
     sweep_table = _table(document, "sweep", fail)
     declared = {p.name: p for p in solver.parameters}
     for table_name, table in (("parameters", fixed_table), ("sweep", sweep_table)):
         for key in table:
             if key not in declared:
-                fail(f"[{table_name}] unknown key {key!r}; allowed keys for kind {kind!r}: {', '.join(declared)}")
+                fail(f"[{table_name}] unknown key {key!r}; allowed keys for kind {solver.kind!r}: "
+                     f"{', '.join(declared)}")
     both = set(fixed_table) & set(sweep_table)
     if both:
         fail(f"{sorted(both)[0]!r} is both in [parameters] and in [sweep]; give it in one of them")
@@ -170,15 +226,48 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
                  f"give it in [parameters] or [sweep]; allowed: {parameter.allowed()}")
         else:
             fixed[parameter.name] = parameter.default
+    return fixed, sweep
 
-    job = Job(name=name, kind=kind, seed=seed, realizations=realizations, output=Path(out),
-              fixed=fixed, sweep=sweep, text=text)
-    for point in range(job.n_points):
-        try:
-            solver.check(job.point_parameters(point))
-        except JobError as error:
-            fail(f"sweep point {job.describe_point(point)}: {error}")
-    return job
+
+def _input_hashes(solver: Solver, fixed: dict, sweep: dict, fail) -> dict[str, dict[str, str]]:
+    """The SHA-256 of every file the job names, by parameter and path (an empty path names no file)."""
+    hashes = {}
+    for parameter in (p for p in solver.parameters if p.is_file):
+        values = sweep[parameter.name] if parameter.name in sweep else [fixed[parameter.name]]
+        paths = [path for path in values if path]
+        if paths:
+            hashes[parameter.name] = {path: _sha256(parameter.name, path, fail) for path in paths}
+    return hashes
+
+
+def _sha256(key: str, path: str, fail) -> str:
+    if not Path(path).is_file():
+        fail(f"{key} = {path!r}: no such file")
+    try:
+        with open(path, "rb") as file:
+            return hashlib.file_digest(file, "sha256").hexdigest()
+    except OSError as error:
+        fail(f"{key} = {path!r}: cannot read the file ({error.strerror})")
+
+
+def _check_memory(solver: Solver, params: dict) -> None:
+    """Refuse a point whose task would need more memory than this machine has."""
+    need, total = solver.memory(params), _physical_memory()
+    if need > total:
+        keys = ", ".join(f"{key}={params[key]!r}" for key in solver.memory_keys(params))
+        raise JobError(f"one task needs about {_in_binary_units(need)} of memory (estimated from {keys}), "
+                       f"more than this machine's {_in_binary_units(total)}")
+
+
+def _physical_memory() -> int:
+    """This machine's physical memory in bytes."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def _in_binary_units(n_bytes: int) -> str:
+    """``n_bytes`` to three digits in the largest binary unit it reaches, e.g. '23.4 GiB'."""
+    exponent = min(max(n_bytes.bit_length() - 1, 0) // 10, len(BINARY_UNITS) - 1)
+    return f"{n_bytes / 1024**exponent:.3g} {BINARY_UNITS[exponent]}"
 
 
 def _top(document: dict, key: str, expected: type, fail) -> Any:

@@ -26,7 +26,9 @@ class Parameter:
     with ``sweepable=False`` changes the shape of the outputs and must be fixed
     for the whole job.  ``affects_seed=False`` marks a choice of method: tasks
     that differ only in it get the same random stream, hence the same initial
-    condition, so methods can be compared task by task.
+    condition, so methods can be compared task by task.  ``is_file=True`` marks
+    the path of an input file (a string; empty: no file): the job records the
+    SHA-256 of the file's content, and a resume refuses a changed file.
     """
 
     name: str
@@ -41,6 +43,7 @@ class Parameter:
     choices: tuple | None = None
     sweepable: bool = True
     affects_seed: bool = True
+    is_file: bool = False
 
     @property
     def required(self) -> bool:
@@ -60,11 +63,12 @@ class Parameter:
         return f"{_TYPE_NAMES[self.type]}, {text}" if len(parts) > 1 else _TYPE_NAMES[self.type]
 
     def coerce(self, value: Any, where: str) -> Any:
-        """Return ``value`` as this parameter's type, or raise JobError naming ``where``."""
+        """Return ``value`` as this parameter's type, or raise JobError naming ``where``.
+
+        An integer is accepted where a number is meant, never a number where an integer is.
+        """
         if self.type is float and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
-        if self.type is int and isinstance(value, float) and value.is_integer() and abs(value) < 2**53:
-            value = int(value)
         if not isinstance(value, self.type) or (self.type is not bool and isinstance(value, bool)):
             raise JobError(f"{where} = {value!r}: must be {_TYPE_NAMES[self.type]}; allowed: {self.allowed()}")
         if self.type is float and math.isnan(value):

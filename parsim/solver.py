@@ -82,6 +82,13 @@ class Solver:
     - ``coordinates(fixed)``: the observable coordinates, from the fixed parameters;
     - ``check(params)``: cross-field checks of one parameter point (raise JobError);
     - ``cost(params)``: relative cost estimate, so the costliest tasks start first;
+    - ``memory(params)``: estimate of one task's peak memory in bytes (within a factor of
+      about 2), computed from the parameters alone, so that a job whose tasks cannot fit
+      in memory is refused before anything is built; ``memory_keys(params)``: the
+      parameters that estimate grows with at that point, named when it is refused;
+    - ``warm_up_parameters(params)``: a small point that calls the same kernels as
+      ``params`` in a fraction of a second; the runner solves it once per rank before any
+      task, so that compiling the kernels is not timed as part of a task;
     - ``solve(params, rng, comm)``: run one task.  ``comm`` is the task's group of
       ranks (``parsim run --ranks-per-task``; size 1 = serial); every rank of it calls
       ``solve`` with the same arguments, and the result of its rank 0 is the task's
@@ -98,6 +105,9 @@ class Solver:
     coordinates: Callable[[dict], dict[str, Coordinate]]
     check: Callable[[dict], None]
     cost: Callable[[dict], float]
+    memory: Callable[[dict], int]
+    memory_keys: Callable[[dict], tuple[str, ...]]
+    warm_up_parameters: Callable[[dict], dict]
     solve: Callable[[dict, np.random.Generator, "MPI.Comm"], TaskResult | None]
     decomposable: bool = False
 

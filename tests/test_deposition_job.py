@@ -1,5 +1,7 @@
 """Deposition jobs end to end: identical sediments on 1 and 2 ranks and after a resume."""
 
+import shutil
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -102,6 +104,14 @@ def test_agglomerates_from_an_aggregation_task(tmp_path):
     assert result.returncode == 0, result.stderr
     with xr.open_dataset(tmp_path / "flakes" / "flakes.nc") as ds:
         assert int(ds.n_spheres.squeeze()) == 30 * 25
+
+    # Another cluster at the same path: resuming would mix two particles in one dataset, so it is refused.
+    aggregation.write_text(aggregation.read_text().replace("seed = 1", "seed = 2"))
+    assert run_serial("run", str(aggregation), "--output", str(tmp_path / "other"), "--quiet").returncode == 0
+    shutil.copy(tmp_path / "other" / "tasks" / "p0000_r0000.h5", cluster)
+    resumed = run_serial("run", str(deposition), "--output", str(tmp_path / "flakes"), "--quiet")
+    assert resumed.returncode == 2, resumed.stderr
+    assert f"holds results computed from a different agglomerate_file '{cluster}'" in resumed.stderr
 
 
 @pytest.mark.parametrize("change, message", [

@@ -1,12 +1,22 @@
-"""Job files: what is accepted, and the message for what is not."""
+"""Job files: what is accepted, and the message for what is not; the job's identity in its output folder."""
 
+import hashlib
+import json
+import re
 import subprocess
 import sys
+import warnings
+from pathlib import Path
 
+import h5py
+import numpy as np
 import pytest
 
+from parsim.agglomerate_file import read_agglomerate
 from parsim.errors import JobError
 from parsim.job import load_job, parse_job
+from parsim.output.dataset import all_statistics, build_dataset
+from parsim.output.folder import OutputFolder
 from parsim.solvers import SOLVERS
 
 BASE = """
@@ -21,6 +31,18 @@ radius = 0.2
 n_spheres = [100, 400]
 volume_fraction = [0.1, 0.2, 0.3]
 """
+
+DEPOSITION = """
+name = "d"
+kind = "deposition"
+seed = 1
+realizations = 1
+[parameters]
+n_particles = 10
+box_length = 20.0
+"""
+
+TWO_SPHERES = "x,y,z,r\n0,0,0,1\n1.5,0,0,1\n"
 
 
 def parse(text):
@@ -64,10 +86,165 @@ def test_seed_depends_on_task_indices_only_and_not_on_the_method():
     (("n_spheres = [100, 400]", "n_spheres = [100, 400]\nradius = [0.2]"), "'radius' is both in"),
     (("n_spheres = [100, 400]", ""), "parameter 'n_spheres' is required"),
     (("[0.1, 0.2, 0.3]", "[0.1, 0.8]"), r"volume_fraction=0.8: the initial lattice does not fit .*condition 4\.2"),
+    (("n_spheres = [100, 400]", "n_spheres = [100.0]"), r"n_spheres\[0\] = 100.0: must be an integer"),
+    (("radius = 0.2", "radius = 0.2\nbox_levels = 8.0"), "box_levels = 8.0: must be an integer"),
+    (("realizations = 2", "realizations = 2.0"), "realizations = 2.0: must be an integer"),
+    (("seed = 7", "seed = 1.0"), "seed = 1.0: must be an integer"),
+    (("radius = 0.2", "radius = true"), "radius = True: must be a number"),
+    (("radius = 0.2", "radius = 1" + "0" * 30), r"parameters\.radius: an integer beyond the 64 bits of TOML"),
+    (("[0.1, 0.2, 0.3]", "[0.1, 0x1" + "0" * 5000 + "]"), r"sweep\.volume_fraction\[1\]: an integer beyond"),
+    (("seed = 7", "seed = 0x1" + "0" * 5000), "seed: an integer beyond the 64 bits"),
+    (("radius = 0.2", "radius = 1" + "0" * 5000), "not valid TOML: an integer far beyond the 64 bits"),
+    (("realizations = 2", "realizations = 1000000000000"),
+     "6 parameter points x 1000000000000 realizations = 6000000000000 tasks; allowed: at most 1000000 tasks"),
+    (("n_spheres = [100, 400]", "n_spheres = [100, 1000000000000]"),
+     r"sweep point n_spheres=1000000000000, volume_fraction=0.1: one task needs about 1\.\d+ PiB of memory "
+     r"\(estimated from n_spheres=1000000000000\), more than this machine's \d+(\.\d+)? [GT]iB"),
 ])
 def test_invalid_jobs_name_the_field_and_the_allowed_values(change, message):
     with pytest.raises(JobError, match=message):
         parse(BASE.replace(*change))
+
+
+@pytest.mark.parametrize("change, message", [
+    (("n_particles = 10", "n_particles = 10.0"), "n_particles = 10.0: must be an integer"),
+    (("n_particles = 10", "n_particles = 1000000000000"),
+     r"one task needs about \d+ TiB of memory \(estimated from n_particles=1000000000000, shape='sphere'\)"),
+    (("n_particles = 10", 'n_particles = 10\nshape = "ellipsoid"\nshape_spheres = 1000000000'),
+     r"one task needs about \d+(\.\d+)? TiB of memory \(estimated from n_particles=10, shape='ellipsoid', "
+     r"shape_spheres=1000000000\)"),
+    (("n_particles = 10", 'n_particles = 10\nshape = "cube"\nshape_size = 100000000'),
+     r"\(estimated from n_particles=10, shape='cube', shape_size=100000000\)"),
+])
+def test_invalid_deposition_sizes(change, message):
+    with pytest.raises(JobError, match=message):
+        parse(DEPOSITION.replace(*change))
+
+
+@pytest.mark.parametrize("path", sorted(Path("jobs").glob("*.toml")), ids=lambda path: path.stem)
+def test_every_example_job_is_valid(path, tmp_path):
+    flake = tmp_path / "flake.csv"
+    flake.write_text(TWO_SPHERES)
+    text = re.sub(r'agglomerate_file = ".*"', f'agglomerate_file = "{flake}"', path.read_text())
+    assert parse(text).n_points >= 1
+
+
+def test_a_job_file_must_be_utf8_text(tmp_path):
+    path = tmp_path / "job.toml"
+    path.write_bytes(BASE.replace('name = "t"', 'name = "caf\xe9"').encode("latin-1"))
+    with pytest.raises(JobError, match=f"{re.escape(str(path))}: not a TOML job file \\(not UTF-8 text\\)"):
+        load_job(path, SOLVERS)
+
+
+def sha256(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_input_files_enter_the_job_with_the_hash_of_their_content(tmp_path):
+    flake, other = tmp_path / "flake.csv", tmp_path / "other.csv"
+    flake.write_text(TWO_SPHERES)
+    other.write_text(TWO_SPHERES.replace("1.5", "1.8"))
+    job = parse(DEPOSITION + f'shape = "agglomerate"\n[sweep]\nagglomerate_file = ["{flake}", "{other}"]\n')
+    assert job.input_hashes == {"agglomerate_file": {str(flake): sha256(flake), str(other): sha256(other)}}
+    assert job.input_attributes == {"input_files": f"{flake} {sha256(flake)}\n{other} {sha256(other)}"}
+    assert parse(DEPOSITION.replace("[parameters]", '[parameters]\nagglomerate_file = ""')).input_hashes == {}
+    assert parse(BASE).input_attributes == {"input_files": ""}
+
+
+def test_the_dataset_names_its_input_files(tmp_path):
+    flake = tmp_path / "flake.csv"
+    flake.write_text(TWO_SPHERES)
+    job = parse(DEPOSITION + f'shape = "agglomerate"\nagglomerate_file = "{flake}"\n')
+    solver = SOLVERS["deposition"]
+    observable = solver.coordinates(job.fixed)
+    zeros = {s.name: np.zeros([len(observable[d].values) for d in s.dims]) for s in all_statistics(solver)}
+    dataset = build_dataset(job, solver, lambda task: zeros, mpi_size=1, ranks_per_task=1)
+    assert dataset.attrs["input_files"] == f"{flake} {sha256(flake)}"
+
+
+@pytest.mark.parametrize("name, content, message", [
+    ("flake.h5", b"x,y,z,r\n0,0,0,1\n", "not an HDF5 file"),
+    ("flake.csv", b"x,y,z,r\n0,0,0,1\n0,zero,0,1\n", "line 3: 'zero' is not a number"),
+    ("flake.csv", b"", "the CSV file holds no spheres"),
+    ("flake.csv", b"x,y,z,r\n", "the CSV file holds no spheres"),
+    ("flake.csv", b"x,y,z,r\n0,0,0,1\n0,0,1\n", "line 3 has 3 values, the header 4"),
+    ("flake.csv", b"0,0,0,1\n0,0,1\n", "line 2 has 3 values, line 1 4"),
+    ("flake.csv", b"0,0,1\n1,0,1\n", "a CSV without header needs 4 columns x, y, z, r; found 3"),
+    ("flake.csv", b"x,y,z,r\n\xe9\n", "not UTF-8 text"),
+])
+def test_unreadable_agglomerate_files(tmp_path, name, content, message):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(JobError, match=f"agglomerate_file = '{re.escape(str(path))}': .*{re.escape(message)}"):
+            read_agglomerate(path)
+
+
+@pytest.mark.parametrize("position, radius, message", [
+    ([b"a", b"b"], [1.0, 1.0], "spheres/position and spheres/radius must hold numbers"),
+    ([[0.0, 0.0], [1.5, 0.0]], [1.0], "positions of shape (2, 2) and radii of shape (1,); allowed: (n, 2) or (n, 3)"),
+])
+def test_hdf5_agglomerates_of_the_wrong_layout(tmp_path, position, radius, message):
+    path = tmp_path / "flake.h5"
+    with h5py.File(path, "w") as file:
+        file["spheres/position"], file["spheres/radius"] = position, radius
+    with pytest.raises(JobError, match=re.escape(message)):
+        read_agglomerate(path)
+
+
+def test_csv_agglomerates_with_and_without_header(tmp_path):
+    path = tmp_path / "flake.csv"
+    path.write_text("# two discs\nr, y ,x\n1,0,0\n\n1,0,1.5\n")
+    centres, radii = read_agglomerate(path)
+    np.testing.assert_array_equal(centres, [[0, 0], [1.5, 0]])
+    np.testing.assert_array_equal(radii, [1, 1])
+    path.write_text("0,0,0,1\n1.5,0,0,2\n")
+    centres, radii = read_agglomerate(path)
+    assert centres.shape == (2, 3) and list(radii) == [1, 2]
+
+
+def resumed(tmp_path, first: str, second: str) -> None:
+    """Prepare an output folder for job ``first``, then for job ``second`` as a resume would."""
+    folder = OutputFolder(tmp_path / "out", "t")
+    folder.prepare(parse(first), None)
+    folder.prepare(parse(second), parse(folder.job_copy.read_text()))
+
+
+@pytest.mark.parametrize("change, message", [
+    (("seed = 7", "seed = 8"), "differs in: seed (7 then, 8 now);"),
+    (("radius = 0.2", "radius = 0.3"), "differs in: [parameters] radius (0.2 then, 0.3 now);"),
+    (("[100, 400]", "[100]"), "differs in: [sweep] n_spheres ([100, 400] then, [100] now);"),
+    (("radius = 0.2", "radius = 0.2\nmass = 2.0"), "differs in: [parameters] mass (1.0 then, 2.0 now);"),
+    (("seed = 7\nrealizations = 2", "seed = 8\nrealizations = 3"),
+     "differs in: seed (7 then, 8 now), realizations (2 then, 3 now);"),
+    (("radius = 0.2\n[sweep]", "[sweep]\nradius = [0.2]"),
+     "differs in: [parameters] radius (0.2 then, unset now), [sweep] radius (unset then, [0.2] now);"),
+])
+def test_resume_names_each_key_that_differs(tmp_path, change, message):
+    with pytest.raises(JobError, match=re.escape(message)):
+        resumed(tmp_path, BASE, BASE.replace(*change))
+
+
+def test_resume_accepts_the_same_job_written_differently(tmp_path):
+    resumed(tmp_path, BASE, "# the same job\n" + BASE.replace("radius = 0.2", "radius = 0.20\nmass = 1.0"))
+
+
+def test_resume_refuses_a_changed_input_file(tmp_path):
+    flake = tmp_path / "flake.csv"
+    flake.write_text(TWO_SPHERES)
+    text = DEPOSITION + f'shape = "agglomerate"\nagglomerate_file = "{flake}"\n'
+    before = sha256(flake)
+    folder = OutputFolder(tmp_path / "out", "d")
+    folder.prepare(parse(text), None)
+    assert json.loads((tmp_path / "out" / "inputs.json").read_text()) == {"agglomerate_file": {str(flake): before}}
+    folder.prepare(parse(text), parse(folder.job_copy.read_text()))  # unchanged: resumes
+    flake.write_text(TWO_SPHERES.replace("1.5", "1.9"))
+    with pytest.raises(JobError, match=re.escape(
+            f"output folder {tmp_path / 'out'} holds results computed from a different agglomerate_file "
+            f"'{flake}' (its content changed since the first run: sha256 {before[:12]}... then, "
+            f"{sha256(flake)[:12]}... now); give another output folder or restore the file")):
+        folder.prepare(parse(text), parse(folder.job_copy.read_text()))
 
 
 def test_supplementary_initial_condition_needs_no_volume_fraction():

@@ -5,7 +5,8 @@ coordinate), then ``realization`` (CF ``standard_name = "realization"``), then
 the observable dimensions a statistic declares (``r``, ``box_size``, ...).
 Fixed parameters are scalar coordinates.  Every variable has ``units`` and
 ``long_name``; the global attributes carry the parsim version, the job file
-text, the job seed, the MPI size, the ranks per task and the creation time.
+text, the job seed, the input files with the SHA-256 of their content, the MPI
+size, the ranks per task and the creation time.
 """
 
 import datetime
@@ -76,6 +77,7 @@ def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict
         "job_kind": job.kind,
         "job_seed": job.seed,
         "job_text": job.text,
+        **job.input_attributes,
         "mpi_size": mpi_size,
         "ranks_per_task": ranks_per_task,
         "date_created": created,

@@ -28,7 +28,17 @@ SHAPES = ("sphere", "rod", "four_rods", "tripod", "spiky", "cube", "ellipsoid", 
 LATERAL = {"periodic": sdbd.LATERAL_PERIODIC, "walls": sdbd.LATERAL_WALLS, "none": sdbd.LATERAL_NONE}
 FLOOR = {"stop": sdbd.FLOOR_STOP, "roll": sdbd.FLOOR_ROLL}
 SIZE_DISTRIBUTIONS = ("monodisperse", "uniform", "lognormal")
-BULK_SLAB = (0.25, 0.75)  # of the filling height (section 4.1 of the issue: the bulk)
+SMOOTH_SHAPES = ("ellipsoid", "superellipsoid")
+SIZE_KEYS = {"rod": "shape_size", "four_rods": "shape_size", "tripod": "shape_size", "spiky": "shape_size",
+             "cube": "shape_size", "ellipsoid": "shape_spheres", "superellipsoid": "shape_spheres",
+             "agglomerate": "agglomerate_file"}  # the parameter that sets how many spheres a particle has
+BYTES_PER_PARTICLE = 512  # the terms of one task's memory estimate, see memory()
+BYTES_PER_SEDIMENT_SPHERE = 128
+BYTES_PER_SMOOTH_SHAPE_SPHERE = 3072
+BYTES_PER_PACKING_SAMPLE = 64
+BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the filling height, away from floor and surface
+WARM_UP_PARTICLES = 4  # particles of the warm-up run, which compiles the kernels before any task
+WARM_UP_PACKING_SAMPLES = 1000  # the fewest allowed
 PROFILE_TOP = 1.25  # the profile phi(z) covers 0 <= z <= PROFILE_TOP x filling height
 
 PARAMETERS = (
@@ -56,7 +66,8 @@ PARAMETERS = (
     Parameter("shape_spheres", int, 1785, "1", "number of spheres approximating an ellipsoid or superellipsoid "
               "(Fig. 1d: 1785)", low=1),
     Parameter("agglomerate_file", str, "", "1", "CSV (x, y, z, r) or HDF5 (spheres/position, spheres/radius, e.g. "
-              "an aggregation task file) holding the agglomerate; it is rescaled to mean radius sphere_radius"),
+              "an aggregation task file) holding the agglomerate; it is rescaled to mean radius sphere_radius",
+              is_file=True),
     Parameter("sphere_radius", float, 0.5, LENGTH_UNITS, "radius of the particles' spheres (the default 0.5 "
               "makes lengths count sphere diameters); shape lengths are in units of it",
               low=0.0, low_inclusive=False),
@@ -114,9 +125,7 @@ EVENT_TOTALS = {"frustrated_steps": "frustrated_trial_rotation", "cycling_interr
 
 def check(params: dict) -> None:
     if params["shape"] == "agglomerate":
-        if not params["agglomerate_file"]:
-            raise JobError("shape = 'agglomerate' needs agglomerate_file (a CSV or HDF5 file of spheres)")
-        read_agglomerate(params["agglomerate_file"])
+        particle_shape(params)  # reads and checks the file
     if params["size_distribution"] == "uniform" and not params["size_spread"] < 1.0:
         raise JobError(f"size_spread = {params['size_spread']} with size_distribution = 'uniform': allowed: "
                        "0 <= size_spread < 1 (factors must stay positive)")
@@ -138,6 +147,49 @@ def coordinates(fixed: dict) -> dict[str, Coordinate]:
 
 def cost(params: dict) -> float:
     return float(params["n_particles"]) * len(particle_shape(params)[1])
+
+
+def memory(params: dict) -> int:
+    """Peak memory of one task in bytes, from the number of particles and the spheres of one particle.
+
+    - ``BYTES_PER_PARTICLE`` per particle: its size factor, rotation, drop position, centre of
+      mass, state, contacts and 13 event counters, with their input copies;
+    - ``BYTES_PER_SEDIMENT_SPHERE`` per sphere of the sediment: position, radius, particle index,
+      link of the sediment grid, and the sorted copies and cell indices of the packing and
+      contact statistics;
+    - ``BYTES_PER_SMOOTH_SHAPE_SPHERE`` per sphere of a (super)ellipsoid, once: building it scans
+      16 surface samples per sphere (points, normals, chords, cells, a heap);
+    - ``BYTES_PER_PACKING_SAMPLE`` per quasi-Monte Carlo point of one slab of the packing fraction.
+
+    Measured peaks: 0.37 KiB per particle of one sphere, 95 B per sediment sphere of cubes
+    (L = 3), 2.4 KiB per sphere of an ellipsoid of 8000 spheres.
+    """
+    spheres = _spheres_per_particle(params)
+    build = BYTES_PER_SMOOTH_SHAPE_SPHERE * spheres if params["shape"] in SMOOTH_SHAPES else 0
+    sediment = params["n_particles"] * (BYTES_PER_PARTICLE + BYTES_PER_SEDIMENT_SPHERE * spheres)
+    return build + sediment + BYTES_PER_PACKING_SAMPLE * params["packing_samples"]
+
+
+def memory_keys(params: dict) -> tuple[str, ...]:
+    size = SIZE_KEYS.get(params["shape"])
+    return ("n_particles", "shape", size) if size else ("n_particles", "shape")
+
+
+def warm_up_parameters(params: dict) -> dict:
+    """The point with a few particles and the fewest packing samples: the same kernels in milliseconds."""
+    return {**params, "n_particles": min(params["n_particles"], WARM_UP_PARTICLES),
+            "packing_samples": WARM_UP_PACKING_SAMPLES}
+
+
+def _spheres_per_particle(params: dict) -> int:
+    """Spheres of one particle, counted without building it (an agglomerate's file is read)."""
+    shape, size = params["shape"], params["shape_size"]
+    if shape == "agglomerate":
+        return len(particle_shape(params)[1])
+    if shape in SMOOTH_SHAPES:
+        return params["shape_spheres"]  # at most: medial balls that add nothing are dropped
+    return {"sphere": 1, "rod": size, "four_rods": 4 * size - 3, "tripod": 3 * size - 2, "spiky": 3 * size - 2,
+            "cube": size**3 - max(size - 2, 0) ** 3}[shape]
 
 
 def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
@@ -218,6 +270,8 @@ def _configuration(params, result, scale) -> Configuration:
 
 def particle_shape(params: dict) -> tuple[np.ndarray, np.ndarray, float]:
     """Offsets and radii of the particle (in length units, about its centre of mass) and its volume."""
+    if params["shape"] == "agglomerate" and not params["agglomerate_file"]:
+        raise JobError("shape = 'agglomerate' needs agglomerate_file (a CSV or HDF5 file of spheres)")
     return _built_shape(params["shape"], params["shape_size"], params["shape_spacing"],
                         (params["semi_axis_x"], params["semi_axis_y"], params["semi_axis_z"]),
                         (params["exponent_vertical"], params["exponent_horizontal"]), params["shape_spheres"],
@@ -295,4 +349,5 @@ def _measuring_box(params, result):
 
 SOLVER = Solver(kind="deposition", description="steepest descent ballistic deposition of multi-sphere particles "
                 "(Topic & Poeschel 2016)", parameters=PARAMETERS, statistics=STATISTICS,
-                coordinates=coordinates, check=check, cost=cost, solve=solve)
+                coordinates=coordinates, check=check, cost=cost, memory=memory, memory_keys=memory_keys,
+                warm_up_parameters=warm_up_parameters, solve=solve)
