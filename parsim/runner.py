@@ -81,7 +81,11 @@ def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
 def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, comm: MPI.Comm, progress: bool,
                  ranks_per_task: int) -> None:
     solver = SOLVERS[job.kind]
-    bar = TaskProgress(job.name, len(job.tasks()), len(job.tasks()) - len(pending), progress)
+    _warm_up(job, pending, progress)
+    point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
+    to_do = set(pending)
+    bar = TaskProgress(job.name, [point_costs[task.point] for task in pending],
+                       [point_costs[task.point] for task in job.tasks() if task not in to_do], progress)
 
     def work(k: int, group: MPI.Comm) -> None:
         if not solver.decomposable:
@@ -96,7 +100,7 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, comm: MPI.
         if group.Get_rank() > 0:
             return
         result.statistics["wall_time"] = time.perf_counter() - start
-        attrs = {**params, "job_name": job.name, "job_seed": job.seed, "spawn_key": list(seed.spawn_key),
+        attrs = {**params, **job.input_attributes, "job_name": job.name, "job_seed": job.seed, "spawn_key": list(seed.spawn_key),
                  "point": task.point, "realization": task.realization}
         write_task_file(folder.task_path(task), result, attrs)
 
@@ -105,9 +109,35 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, comm: MPI.
         return (f"task {task.label} ({job.describe_point(task.point)}, realization {task.realization}) failed: "
                 f"{describe_exception(error)}")
 
-    run_group_tasks(comm, ranks_per_task, len(pending), work, on_finished=lambda k, r: bar.task_finished(),
+    run_group_tasks(comm, ranks_per_task, len(pending), work,
+                    on_finished=lambda k, rank: bar.task_finished(point_costs[pending[k].point]),
                     describe_failure=describe_failure)
     bar.close()
+
+
+def _warm_up(job: Job, pending: list[Task], announce: bool) -> None:
+    """Compile, or load from numba's cache, the kernels of the pending tasks before any task is timed.
+
+    Each distinct small version of the pending points (:attr:`Solver.warm_up_parameters`)
+    is solved once on this rank and thrown away, so that a task's ``wall_time``
+    measures the computation alone.  Kernels that only a decomposed task calls
+    (``--ranks-per-task``) still compile in the first such task.
+    """
+    solver = SOLVERS[job.kind]
+    rehearsals = {}
+    for task in pending:
+        small = solver.warm_up_parameters(job.point_parameters(task.point))
+        rehearsals.setdefault(repr(sorted(small.items())), small)
+    if not rehearsals:
+        return
+    if announce:
+        print("parsim: preparing the kernels (compiled once per machine, about a minute; loaded from the cache "
+              "afterwards)...", file=sys.stderr, flush=True)
+    start = time.perf_counter()
+    for small in rehearsals.values():
+        solver.solve(small, np.random.default_rng(0), MPI.COMM_SELF)
+    if announce:
+        print(f"parsim: kernels ready in {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
 
 
 def _write_dataset(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task: int) -> None:

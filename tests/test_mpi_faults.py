@@ -118,6 +118,13 @@ def test_validate_does_not_create_the_output_folder(job, tmp_path):
     assert not (tmp_path / "new").exists()
 
 
+@pytest.mark.mpi
+def test_an_mpi_without_thread_multiple_gets_one_line_naming_the_fix(job, tmp_path, monkeypatch):
+    monkeypatch.setenv("MPI4PY_RC_THREAD_LEVEL", "serialized")  # what a cluster's MPI may grant at most
+    result, _ = run_into(job, tmp_path / "out")
+    assert_one_line(result, 1, "MPI_THREAD_MULTIPLE", "MPICH_MAX_THREAD_SAFETY=multiple")
+
+
 # -- a full disk in each phase that writes -----------------------------------------------------
 
 @pytest.fixture
@@ -160,8 +167,7 @@ def test_disk_full_while_task_files_are_written(job, finished, small_disk):
 @pytest.mark.mpi
 def test_disk_full_when_the_dataset_is_written(job, finished, small_disk):
     mount, fill = small_disk
-    shutil.copytree(finished / "tasks", mount / "out" / "tasks")
-    shutil.copy(finished / "job.toml", mount / "out" / "job.toml")
+    shutil.copytree(finished, mount / "out", ignore=shutil.ignore_patterns("*.nc"))
     fill(4096)
     result, _ = run_into(job, mount / "out")
     assert_one_line(result, 1, "no space left on", str(mount / "out" / "faults.nc"))

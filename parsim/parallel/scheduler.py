@@ -76,7 +76,9 @@ def run_tasks(
     it and it returns when all tasks are done.
     """
     if MPI.Query_thread() < MPI.THREAD_MULTIPLE and comm.Get_size() > 1:
-        raise RuntimeError("parsim's scheduler needs an MPI library initialised with MPI_THREAD_MULTIPLE")
+        raise ParsimError("the MPI library gives no MPI_THREAD_MULTIPLE, which parsim's task server thread needs; "
+                          "use an MPI library built with it (MPICH, Open MPI), or enable it "
+                          "(Cray MPICH: export MPICH_MAX_THREAD_SAFETY=multiple)")
     describe_failure = describe_failure or _traceback_message
     finished_lock = threading.Lock()
 
