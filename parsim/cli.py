@@ -17,6 +17,7 @@ one rank alone aborts the whole job.
 """
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -69,14 +70,14 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args) -> int:
     """``parsim run`` on every rank: rank 0 reads the job and hands it out, then all ranks run it.
 
-    A ParsimError reaches every rank alike (rank 0's phases hand theirs to all
-    ranks), so rank 0 prints it and all ranks return its status.  Any other
-    exception happened on one rank alone: that rank prints it and aborts the job.
+    A ParsimError of rank 0's phases reaches every rank alike, so rank 0 prints
+    it and all ranks return its status.  Any other exception, and a ParsimError
+    of one rank alone, is printed by its rank, which aborts the job.
     """
     from mpi4py import MPI
 
     from parsim.job import load_job
-    from parsim.parallel.collective import FailedOnRoot, abort_job, on_root
+    from parsim.parallel.collective import FailedOnRoot, abort_job, on_root, raised_on_every_rank
     from parsim.runner import run_job
     from parsim.solvers import SOLVERS
 
@@ -86,10 +87,17 @@ def _run(args) -> int:
         path = run_job(job, comm, progress=not args.quiet, ranks_per_task=args.ranks_per_task)
     except FailedOnRoot:
         return EXIT_RUN_FAILED  # rank 0 has printed its traceback
+    except KeyboardInterrupt:  # before the run's own handler is in place (reading the job)
+        if comm.Get_rank() == 0:
+            print("\nparsim: interrupted before any task started", file=sys.stderr)
+        return 128 + signal.SIGINT
     except ParsimError as error:
+        status = EXIT_USER_ERROR if isinstance(error, JobError) else EXIT_RUN_FAILED
+        if not raised_on_every_rank(error):  # e.g. a file that this rank alone cannot read
+            abort_job(comm, f"{error} (on rank {comm.Get_rank()})", status)
         if comm.Get_rank() == 0:
             print(f"parsim: error: {error}", file=sys.stderr)
-        return EXIT_USER_ERROR if isinstance(error, JobError) else EXIT_RUN_FAILED
+        return status
     except Exception as error:  # noqa: BLE001 - one rank's failure must not leave the others waiting
         if comm.Get_size() == 1:
             raise

@@ -27,6 +27,8 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 def ending_on_signals(on_signal: Callable[[signal.Signals], None]):
     """While the block runs, SIGINT, SIGTERM and SIGHUP call ``on_signal(signal)`` and end the process.
 
+    A signal that the process ignores when the block starts is left ignored.
+
     Outside the main thread (where Python allows no signal handlers) the block
     runs without this protection.
     """
@@ -36,15 +38,17 @@ def ending_on_signals(on_signal: Callable[[signal.Signals], None]):
     receiver, sender = socket.socketpair()
     sender.setblocking(False)
     previous_fd = signal.set_wakeup_fd(sender.fileno(), warn_on_full_buffer=False)
-    previous_handlers = {number: signal.signal(number, _ignore) for number in SIGNALS}
+    # A signal ignored on purpose stays ignored: SIGHUP under nohup, SIGINT in a background job of a script.
+    watched = [number for number in SIGNALS if signal.getsignal(number) is not signal.SIG_IGN]
+    previous_handlers = {number: signal.signal(number, _ignore) for number in watched}
     watcher = threading.Thread(target=_watch, args=(receiver, on_signal), name="parsim-signals", daemon=True)
     watcher.start()
     try:
         yield
     finally:
-        signal.set_wakeup_fd(previous_fd)
         for number, handler in previous_handlers.items():
             signal.signal(number, handler)
+        signal.set_wakeup_fd(previous_fd)
         sender.close()  # the watcher reads the end of the stream and returns
         watcher.join()
         receiver.close()

@@ -19,6 +19,7 @@ ranks wait.  The group's rank 0 writes the task file.
 
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -34,26 +35,28 @@ from parsim.output.location import check_output_location
 from parsim.output.lock import FolderLock
 from parsim.output.snapshot import read_statistics, write_task_file
 from parsim.parallel.collective import on_root
-from parsim.parallel.scheduler import run_group_tasks
+from parsim.parallel.scheduler import require_thread_multiple, run_group_tasks
 from parsim.progress import TaskProgress
 from parsim.solvers import SOLVERS
 
 #: How long a rank other than 0 waits, after a signal, for rank 0 to end the job before it aborts it itself.
 SIGNAL_GRACE_SECONDS = 2.0
+#: How long rank 0 waits, after a signal, for task files that other ranks are writing, before it counts them.
+WRITE_SETTLE_SECONDS = 0.2
 
 
 def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ranks_per_task: int = 1) -> Path:
     """Run every unfinished task of ``job`` on groups of ``ranks_per_task`` ranks; returns the dataset path."""
-    _check_ranks_per_task(ranks_per_task, comm.Get_size())
-    solver = SOLVERS[job.kind]
+    on_root(comm, lambda: _check_ranks(comm, ranks_per_task))
     folder = OutputFolder(job.output, job.name)
     lock = FolderLock(folder.root)
+    writing = threading.Lock()  # held while a task file is written; a signal takes it to stop the writes
     rank = comm.Get_rank()
 
     try:
-        with ending_on_signals(lambda number: _end_on_signal(number, job, folder, lock, comm)):
+        with ending_on_signals(lambda number: _end_on_signal(number, job, folder, lock, writing, comm)):
             pending = on_root(comm, lambda: _claim(job, folder, lock))
-            _run_pending(job, pending, folder, comm, progress and rank == 0, ranks_per_task)
+            _run_pending(job, pending, folder, writing, comm, progress and rank == 0, ranks_per_task)
             on_root(comm, lambda: _write_dataset(job, folder, comm.Get_size(), ranks_per_task))
     finally:
         if rank == 0:
@@ -78,8 +81,8 @@ def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
     return pending
 
 
-def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, comm: MPI.Comm, progress: bool,
-                 ranks_per_task: int) -> None:
+def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: threading.Lock, comm: MPI.Comm,
+                 progress: bool, ranks_per_task: int) -> None:
     solver = SOLVERS[job.kind]
     _warm_up(job, pending, progress)
     point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
@@ -102,7 +105,8 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, comm: MPI.
         result.statistics["wall_time"] = time.perf_counter() - start
         attrs = {**params, **job.input_attributes, "job_name": job.name, "job_seed": job.seed, "spawn_key": list(seed.spawn_key),
                  "point": task.point, "realization": task.realization}
-        write_task_file(folder.task_path(task), result, attrs)
+        with writing:
+            write_task_file(folder.task_path(task), result, attrs)
 
     def describe_failure(k: int, error: Exception) -> str:
         task = pending[k]
@@ -147,17 +151,34 @@ def _write_dataset(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task
     write_dataset(dataset, folder.dataset)
 
 
-def _end_on_signal(number: signal.Signals, job: Job, folder: OutputFolder, lock: FolderLock, comm: MPI.Comm) -> None:
-    """A signal's last words: rank 0 releases the lock and says what is kept; the other ranks let it end the job."""
+def _end_on_signal(number: signal.Signals, job: Job, folder: OutputFolder, lock: FolderLock,
+                   writing: threading.Lock, comm: MPI.Comm) -> None:
+    """A signal's last words: no more task files; rank 0 releases the lock and says what is kept.
+
+    Every rank stops writing task files at once (a write under way completes).
+    Rank 0 waits a moment for the other ranks' writes under way, counts the
+    task files, prints the line and exits; the launcher then ends the other
+    ranks, which abort the job themselves if rank 0 did not get the signal.
+    """
+    writing.acquire()
     if comm.Get_rank() != 0:
-        time.sleep(SIGNAL_GRACE_SECONDS)  # the launcher ends this rank when rank 0 exits
-        comm.Abort(128 + number)  # rank 0 did not get the signal: end the job from here
+        time.sleep(SIGNAL_GRACE_SECONDS)
+        print(f"\nparsim: rank {comm.Get_rank()} got {number.name}; run the same command to finish",
+              file=sys.stderr, flush=True)
+        comm.Abort(128 + number)
         return
+    time.sleep(WRITE_SETTLE_SECONDS)
     lock.release()
     kept = sum(folder.is_finished(task) for task in job.tasks())
     what = "interrupted" if number == signal.SIGINT else f"stopped by {number.name}"
     print(f"\nparsim: {what}; {kept} of {len(job.tasks())} tasks kept, run the same command to finish",
           file=sys.stderr, flush=True)
+
+
+def _check_ranks(comm: MPI.Comm, ranks_per_task: int) -> None:
+    """What the ranks must offer before anything is done: threads for the scheduler, groups that divide them."""
+    require_thread_multiple(comm)
+    _check_ranks_per_task(ranks_per_task, comm.Get_size())
 
 
 def _check_ranks_per_task(ranks_per_task: int, n_ranks: int) -> None:

@@ -54,12 +54,16 @@ def kill_session(process: subprocess.Popen) -> None:
         os.killpg(process.pid, signal.SIGKILL)
     except ProcessLookupError:
         pass
-    for pid in _session_members(process.pid):
+    members = _session_members(process.pid)
+    for pid in members:
         try:
             os.kill(pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
     process.wait()
+    deadline = time.monotonic() + 30
+    while any(Path(f"/proc/{pid}").exists() for pid in members) and time.monotonic() < deadline:
+        time.sleep(0.01)  # gone, not merely signalled: a next run must not meet them
 
 
 def _session_members(session: int) -> list[int]:

@@ -121,7 +121,14 @@ def test_invalid_deposition_sizes(change, message):
         parse(DEPOSITION.replace(*change))
 
 
-@pytest.mark.parametrize("path", sorted(Path("jobs").glob("*.toml")), ids=lambda path: path.stem)
+JOBS = sorted((Path(__file__).resolve().parent.parent / "jobs").glob("*.toml"))
+
+
+def test_the_example_jobs_are_found():
+    assert len(JOBS) >= 7
+
+
+@pytest.mark.parametrize("path", JOBS, ids=lambda path: path.stem)
 def test_every_example_job_is_valid(path, tmp_path):
     flake = tmp_path / "flake.csv"
     flake.write_text(TWO_SPHERES)

@@ -34,6 +34,9 @@ n_spheres = [16, 25]
 #: Seconds a failing run may take, start-up of both ranks included; the kernels are compiled
 #: beforehand by the ``finished`` fixture, so this bounds the time from the failure to the end.
 BOUND = 60
+#: Seconds a run refused before computing may take: the start-up of two interpreters, and little else.
+REFUSAL_SECONDS = 20
+PAGE = 4096  # a tmpfs gives a file whole pages of this size
 
 
 @pytest.fixture(scope="module")
@@ -89,17 +92,17 @@ def test_read_only_folder_is_refused_before_computing(job, read_only_folder):
     target = read_only_folder / "place"
     result, seconds = run_into(job, target)
     assert_one_line(result, 2, str(target), "not writable")
-    assert seconds < BOUND
+    assert seconds < REFUSAL_SECONDS
 
 
 @pytest.mark.mpi
 def test_output_path_that_is_a_file_is_refused(job, tmp_path):
     target = tmp_path / "a_file"
     target.write_text("not a folder")
-    result, _ = run_into(job, target)
-    assert_one_line(result, 2, str(target), "is a file")
-    result, _ = run_into(job, target / "below")
-    assert_one_line(result, 2, str(target), "is a file")
+    for output in (target, target / "below"):
+        result, seconds = run_into(job, output)
+        assert_one_line(result, 2, str(target), "is a file")
+        assert seconds < REFUSAL_SECONDS
     assert target.read_text() == "not a folder"
 
 
@@ -121,8 +124,9 @@ def test_validate_does_not_create_the_output_folder(job, tmp_path):
 @pytest.mark.mpi
 def test_an_mpi_without_thread_multiple_gets_one_line_naming_the_fix(job, tmp_path, monkeypatch):
     monkeypatch.setenv("MPI4PY_RC_THREAD_LEVEL", "serialized")  # what a cluster's MPI may grant at most
-    result, _ = run_into(job, tmp_path / "out")
+    result, seconds = run_into(job, tmp_path / "out")
     assert_one_line(result, 1, "MPI_THREAD_MULTIPLE", "MPICH_MAX_THREAD_SAFETY=multiple")
+    assert seconds < REFUSAL_SECONDS and not (tmp_path / "out").exists()
 
 
 # -- a full disk in each phase that writes -----------------------------------------------------
@@ -144,18 +148,20 @@ def small_disk(tmp_path):
 
 
 @pytest.mark.mpi
-def test_disk_full_when_the_job_copy_is_written(job, small_disk):
+def test_disk_full_when_the_run_records_its_job(job, small_disk):
     mount, fill = small_disk
-    fill(0)
-    result, _ = run_into(job, mount / "out")
-    assert_one_line(result, 1, "no space left on", str(mount / "out"))
+    fill(PAGE)  # room for the lock file, not for the record of the job that follows it
+    result, seconds = run_into(job, mount / "out")
+    assert_one_line(result, 1, f"no space left on {mount / 'out'}")
+    assert seconds < REFUSAL_SECONDS
+    assert not (mount / "out" / "parsim.lock").exists()
 
 
 @pytest.mark.mpi
 def test_disk_full_while_task_files_are_written(job, finished, small_disk):
     mount, fill = small_disk
-    task_file = next((finished / "tasks").glob("*.h5")).stat().st_size
-    fill(3 * task_file)
+    task_pages = max(-(-path.stat().st_size // PAGE) for path in (finished / "tasks").glob("*.h5"))
+    fill((3 + 3 * task_pages) * PAGE)  # the lock, inputs.json and job.toml, and three task files
     result, _ = run_into(job, mount / "out")
     assert_one_line(result, 1, "no space left on", str(mount / "out" / "tasks"), "task p")
     kept = list((mount / "out" / "tasks").glob("*.h5"))
@@ -168,7 +174,7 @@ def test_disk_full_while_task_files_are_written(job, finished, small_disk):
 def test_disk_full_when_the_dataset_is_written(job, finished, small_disk):
     mount, fill = small_disk
     shutil.copytree(finished, mount / "out", ignore=shutil.ignore_patterns("*.nc"))
-    fill(4096)
+    fill(PAGE)  # room for the lock file alone
     result, _ = run_into(job, mount / "out")
     assert_one_line(result, 1, "no space left on", str(mount / "out" / "faults.nc"))
     assert len(list((mount / "out" / "tasks").glob("*.h5"))) == 12  # nothing computed is lost

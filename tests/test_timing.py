@@ -32,5 +32,5 @@ def test_first_task_is_timed_after_the_kernels_are_compiled(tmp_path):
     assert "parsim: preparing the kernels (compiled once per machine" in result.stderr
     with xr.open_dataset(tmp_path / "out" / "timing.nc") as dataset:
         wall_time = dataset.wall_time.values.ravel()
-    # Four realisations of one point cost about the same; compilation in the first would make it 1000x the others.
-    assert wall_time.max() < 20 * np.median(wall_time), wall_time
+    # Four realisations of one point cost about the same, milliseconds; compiling takes tens of seconds.
+    assert wall_time.max() < 20 * np.median(wall_time) + 0.5, wall_time

@@ -18,7 +18,7 @@ def check_output_location(path: Path) -> None:
     """
     path = Path(path)
     existing = _nearest_existing(path)
-    if not existing.is_dir():
+    if not os.path.isdir(existing):
         what = f"{path} is a file" if existing == path else f"{existing} is a file, so {path} cannot be a folder"
         raise JobError(f"output {path}: {what}; give another output folder (key 'output' or option --output)")
     try:
@@ -31,8 +31,12 @@ def check_output_location(path: Path) -> None:
 
 
 def _nearest_existing(path: Path) -> Path:
-    """``path`` or its nearest ancestor that exists (the working directory for a relative path)."""
+    """``path`` or its nearest ancestor that exists (the working directory for a relative path).
+
+    ``os.path.exists`` rather than ``Path.exists``: a folder that cannot be searched counts as
+    absent here (and its parent then as not writable) instead of raising.
+    """
     candidate = path
-    while not candidate.exists() and candidate.parent != candidate:
+    while not os.path.exists(candidate) and candidate.parent != candidate:
         candidate = candidate.parent
-    return candidate if candidate.exists() else Path.cwd()
+    return candidate if os.path.exists(candidate) else Path.cwd()

@@ -34,19 +34,20 @@ class FailedOnRoot(ParsimError):
 def on_root(comm: MPI.Comm, work: Callable[[], T]) -> T:
     """Run ``work()`` on rank 0 of ``comm``; every rank returns its result or raises its exception.
 
-    Collective.  A :class:`ParsimError` of ``work`` is raised on every rank;
-    any other exception is raised unchanged on rank 0 (with its traceback) and
-    as :class:`FailedOnRoot` on the other ranks.
+    Collective.  A :class:`ParsimError` of ``work`` is raised on every rank,
+    marked by :func:`raised_on_every_rank`; any other exception (a bug, or
+    Ctrl-C before the run's signal handler is in place) is raised unchanged on
+    rank 0 and as :class:`FailedOnRoot` on the other ranks.
     """
     if comm.Get_size() == 1:
-        return work()
+        return _everywhere_if_parsim(work)
     failure = None
     if comm.Get_rank() == 0:
         try:
             outcome = (True, work())
         except ParsimError as error:
             outcome = (False, error)
-        except Exception as error:  # noqa: BLE001 - the other ranks must end too; rank 0 keeps the traceback
+        except BaseException as error:  # noqa: BLE001 - the other ranks must end too; rank 0 keeps the traceback
             outcome = (False, FailedOnRoot(f"rank 0 failed: {error!r}"))
             failure = error
     else:
@@ -56,8 +57,23 @@ def on_root(comm: MPI.Comm, work: Callable[[], T]) -> T:
     if failure is not None:
         raise failure
     if not succeeded:
+        value.on_every_rank = True
         raise value
     return value
+
+
+def raised_on_every_rank(error: ParsimError) -> bool:
+    """Whether every rank raised ``error`` alike (it came through :func:`on_root`), so none waits for another."""
+    return getattr(error, "on_every_rank", False)
+
+
+def _everywhere_if_parsim(work: Callable[[], T]) -> T:
+    """``work()`` on a single rank, where every error is everywhere."""
+    try:
+        return work()
+    except ParsimError as error:
+        error.on_every_rank = True
+        raise
 
 
 def wait_for(request: MPI.Request) -> None:
@@ -66,13 +82,14 @@ def wait_for(request: MPI.Request) -> None:
         time.sleep(POLL_SECONDS)
 
 
-
 def abort_job(comm: MPI.Comm, message: str, status: int = 1) -> None:
     """Print ``parsim: error: MESSAGE`` from this rank and end every rank of the job with ``status``."""
-    sys.stdout.flush()
-    print(f"\nparsim: error: {message}", file=sys.stderr, flush=True)
-    time.sleep(ABORT_GRACE_SECONDS)  # let mpiexec forward the message before MPI_Abort ends the ranks
-    comm.Abort(status)
+    try:
+        sys.stdout.flush()
+        print(f"\nparsim: error: {message}", file=sys.stderr, flush=True)
+        time.sleep(ABORT_GRACE_SECONDS)  # let mpiexec forward the message before MPI_Abort ends the ranks
+    finally:
+        comm.Abort(status)  # even if the message could not be printed (a closed pipe)
 
 
 class FailureReport:
@@ -91,16 +108,20 @@ class FailureReport:
         self._comm = comm
         self._window = MPI.Win.Allocate(8 if comm.Get_rank() == 0 else 0, 8, comm=comm)
         if comm.Get_rank() == 0:
+            self._window.Lock(0, MPI.LOCK_EXCLUSIVE)
             np.frombuffer(self._window.tomemory(), dtype=np.int64)[0] = 0
+            self._window.Unlock(0)
         comm.Barrier()
+        self._failing = threading.Lock()  # rank 0's two threads may fail together: one claims
 
     def fail(self, message: str, status: int = 1) -> None:
         """Report ``message`` and end every rank with ``status``, unless another rank reported first."""
-        answer = threading.Event()
-        first = []
-        threading.Thread(target=self._claim, args=(answer, first), daemon=True).start()
-        if not answer.wait(CLAIM_TIMEOUT_SECONDS) or first[0]:
-            abort_job(self._comm, message, status)
+        if self._failing.acquire(blocking=False):
+            answer = threading.Event()
+            first = []
+            threading.Thread(target=self._claim, args=(answer, first), daemon=True).start()
+            if not answer.wait(CLAIM_TIMEOUT_SECONDS) or first[0]:
+                abort_job(self._comm, message, status)
         time.sleep(CLAIM_TIMEOUT_SECONDS)  # the reporting rank's abort ends this one
         self._comm.Abort(status)
 

@@ -32,12 +32,11 @@ import numpy as np
 from mpi4py import MPI
 
 from parsim.errors import ParsimError, describe_exception
-from parsim.parallel.collective import FailureReport, wait_for
+from parsim.parallel.collective import POLL_SECONDS, FailureReport, wait_for
 
 REQUEST_TAG = 1
 REPLY_TAG = 2
 NO_MORE_TASKS = -1
-POLL_SECONDS = 1e-3  # how often rank 0's server thread looks for requests
 
 
 class TaskFailed(ParsimError):
@@ -75,10 +74,7 @@ def run_tasks(
     the task index and the traceback).  Collective: every rank of ``comm`` calls
     it and it returns when all tasks are done.
     """
-    if MPI.Query_thread() < MPI.THREAD_MULTIPLE and comm.Get_size() > 1:
-        raise ParsimError("the MPI library gives no MPI_THREAD_MULTIPLE, which parsim's task server thread needs; "
-                          "use an MPI library built with it (MPICH, Open MPI), or enable it "
-                          "(Cray MPICH: export MPICH_MAX_THREAD_SAFETY=multiple)")
+    require_thread_multiple(comm)
     describe_failure = describe_failure or _traceback_message
     finished_lock = threading.Lock()
 
@@ -91,9 +87,9 @@ def run_tasks(
         for k in range(n_tasks):
             try:
                 work(k)
+                finished(k, 0)
             except Exception as error:  # noqa: BLE001 - raised with the task's description
                 raise TaskFailed(describe_failure(k, error)) from error
-            finished(k, 0)
         return
 
     sched = comm.Dup()  # private tags: the scheduler never sees other messages
@@ -102,6 +98,8 @@ def run_tasks(
     def run_one(k: int) -> None:
         try:
             work(k)
+            if sched.Get_rank() == 0:
+                finished(k, 0)
         except Exception as error:  # noqa: BLE001 - every failure must end the job with its message
             report.fail(f"{describe_failure(k, error)} (on rank {comm.Get_rank()})")
 
@@ -112,7 +110,6 @@ def run_tasks(
             server.start()
             while (k := counter.take()) != NO_MORE_TASKS:
                 run_one(k)
-                finished(k, 0)
             server.join()
         else:
             done = None
@@ -126,6 +123,14 @@ def run_tasks(
     finally:
         report.free()
         sched.Free()
+
+
+def require_thread_multiple(comm: MPI.Comm) -> None:
+    """Raise a ParsimError naming the fix if ``comm`` has several ranks and MPI gives no MPI_THREAD_MULTIPLE."""
+    if MPI.Query_thread() < MPI.THREAD_MULTIPLE and comm.Get_size() > 1:
+        raise ParsimError("the MPI library gives no MPI_THREAD_MULTIPLE, which parsim's task server thread needs; "
+                          "use an MPI library built with it (MPICH, Open MPI), or enable it "
+                          "(Cray MPICH: export MPICH_MAX_THREAD_SAFETY=multiple)")
 
 
 def run_group_tasks(
