@@ -17,20 +17,20 @@ class TaskProgress:
     """A bar over all tasks of the job, starting at the tasks finished by earlier runs."""
 
     def __init__(self, job_name: str, costs: list[float], already_done: list[float], enabled: bool):
+        self._job_name = job_name
         self._tasks_total = len(costs) + len(already_done)
         self._tasks_done = len(already_done)
-        self._bar = tqdm(total=sum(costs) + sum(already_done), initial=sum(already_done), desc=job_name,
+        self._bar = tqdm(total=sum(costs) + sum(already_done), initial=sum(already_done), desc=self._counted(),
                          file=sys.stderr, disable=not enabled, dynamic_ncols=True, mininterval=0.5, smoothing=0,
-                         bar_format="{desc}: {percentage:3.0f}%|{bar}| {postfix} [{elapsed} elapsed, {remaining} left]")
-        self._show_count()
+                         bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed} elapsed, {remaining} left]")
 
     def task_finished(self, cost: float) -> None:
         self._tasks_done += 1
-        self._show_count(refresh=False)
+        self._bar.set_description_str(self._counted(), refresh=False)
         self._bar.update(cost)
 
     def close(self) -> None:
         self._bar.close()
 
-    def _show_count(self, refresh: bool = True) -> None:
-        self._bar.set_postfix_str(f"{self._tasks_done}/{self._tasks_total} tasks", refresh=refresh)
+    def _counted(self) -> str:
+        return f"{self._job_name} {self._tasks_done}/{self._tasks_total} tasks"

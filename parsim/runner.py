@@ -141,7 +141,7 @@ def _warm_up(job: Job, pending: list[Task], announce: bool) -> None:
     for small in rehearsals.values():
         solver.solve(small, np.random.default_rng(0), MPI.COMM_SELF)
     if announce:
-        print(f"parsim: kernels ready in {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
+        print(f"parsim: kernels ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 
 
 def _write_dataset(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task: int) -> None:
