@@ -50,6 +50,19 @@ volume_fraction = 0.1  # L = 9: wide enough for two ranks' tiles
 method = ["ed", "ts"]
 """
 
+SMALL_TS_JOB = """
+name = "groups_small_ts"
+kind = "aggregation"
+seed = 5
+realizations = 1
+[parameters]
+dimension = 3
+method = "ts"
+volume_fraction = 0.1
+[sweep]
+n_spheres = [64, 343]  # L = 2.8 and 4.9: narrower than two tiles of two halos (3.2 each)
+"""
+
 
 def write_job(tmp_path, text):
     path = tmp_path / "job.toml"
@@ -176,3 +189,18 @@ def test_ts_and_ed_job_on_groups_of_two(tmp_path):
             else:
                 assert imbalance.shape == (0,)
             assert task["statistics/rank_imbalance"][()] == imbalance.max(initial=1.0)
+
+
+@pytest.mark.mpi
+def test_ts_task_too_small_for_the_groups_tiles_runs_in_one_tile(tmp_path):
+    """A box narrower than a tile per rank is not decomposed: the group gives the one-rank result, bitwise."""
+    two, one = run_grouped_and_serial(tmp_path, SMALL_TS_JOB, ranks=2, ranks_per_task=2)
+    xr.testing.assert_identical(reproducible_part(one / "groups_small_ts.nc"),
+                                reproducible_part(two / "groups_small_ts.nc"))
+    with xr.open_dataset(two / "groups_small_ts.nc") as ds:
+        assert (ds.n_clusters == 1).all() and (ds.rank_imbalance == 1.0).all()
+    for path in (one / "tasks").glob("*.h5"):
+        one_arrays, two_arrays = snapshot_arrays(path), snapshot_arrays(two / "tasks" / path.name)
+        assert one_arrays.keys() == two_arrays.keys()
+        for name, array in one_arrays.items():
+            np.testing.assert_array_equal(array, two_arrays[name], err_msg=name)

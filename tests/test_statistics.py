@@ -7,6 +7,7 @@ from parsim.core.statistics import (
     aspect_ratio_and_orientation,
     box_counts,
     cluster_statistics,
+    fit_box_sizes,
     fractal_dimension,
     gyration_tensor,
     pair_distribution,
@@ -262,6 +263,20 @@ def test_fractal_fit_needs_two_box_sizes_in_range():
     eps, counts = box_counts(square_lattice(8, 1.0), np.zeros(2), 16.0, 6)
     with pytest.raises(ValueError, match="fit range"):
         fractal_dimension(eps, counts, 5.0, 7.9)  # only eps = 8 would qualify, and it is above
+
+
+@pytest.mark.parametrize("box_length, expected", [(11.9, 1), (12.0, 2), (12.0 * (1 - 1e-13), 2), (24.0, 3)])
+def test_fit_box_sizes_counts_what_cluster_statistics_fits(box_length, expected):
+    """3R <= L/2^m <= L/2 with R = 1: L/4 >= 3 from L = 12 on (a rounding of 3R below 1e-12 is forgiven)."""
+    assert fit_box_sizes(box_length, 1.0, 12) == expected
+    x = square_lattice(4, box_length / 8)  # centres at L/8 (2i + 1), inside the box
+    if expected < 2:
+        with pytest.raises(ValueError, match="fewer than two box sizes"):
+            cluster_statistics(x, np.ones(len(x)), np.zeros(2), np.full(2, box_length), r_values=[3.0], box_levels=12)
+    else:
+        stats = cluster_statistics(x, np.ones(len(x)), np.zeros(2), np.full(2, box_length), r_values=[3.0],
+                                   box_levels=12)
+        assert np.isfinite(stats["fractal_dimension"])
 
 
 # ------------------------------------------------------------------- all together

@@ -11,7 +11,8 @@ aggregation ... time stepping" (``papers/ballistic-aggregation-time-stepping-deg
 - :func:`pair_distribution`, :func:`pair_distribution_grid`: cumulative pair
   distribution P(r) (eq. 4.7) and the paper's grid 2R < r <= 20R;
 - :func:`box_counts`, :func:`fractal_dimension`: box counting N(eps_m), eps_m = L/2^m,
-  and the least-squares fit of eq. 4.8, log N = log a - D_f log eps;
+  and the least-squares fit of eq. 4.8, log N = log a - D_f log eps; :func:`fit_box_sizes`:
+  how many box sizes the paper's fit range 3R <= eps <= L/2 holds (the fit needs two);
 - :func:`cluster_statistics`: all of the above for one configuration.
 
 All functions accept any configuration (positions of shape (n, d), d = 2 or 3), not only
@@ -32,6 +33,8 @@ SIGN_TIE_ATOL = 1e-12
 # Relative tolerance on the bounds of the fit range of the fractal dimension
 # (box sizes are L/2^m, computed exactly; bounds such as 3R or L/2 may carry rounding).
 FIT_RANGE_RTOL = 1e-12
+# The least-squares fit of the fractal dimension needs this many box sizes in its range.
+MIN_FIT_BOX_SIZES = 2
 # Cell lists are coarsened until they hold at most this many cells per sphere, so a
 # sparse configuration spread over a huge extent never allocates a huge grid.
 MAX_CELLS_PER_SPHERE = 4
@@ -330,23 +333,43 @@ def box_counts(positions, box_lower, box_length, levels):
     if not 1 <= levels <= 63 // d:
         raise ValueError(f"levels must be in [1, {63 // d}] in {d}D, got {levels}")
     codes = np.sort(_morton_codes(x, lower, float(box_length), int(levels)))
-    eps = box_length / 2.0 ** np.arange(1, levels + 1)
-    return eps, _distinct_cells_per_level(codes, d, int(levels))
+    return box_sizes(box_length, levels), _distinct_cells_per_level(codes, d, int(levels))
+
+
+def box_sizes(box_length, levels):
+    """The box sizes eps_m = box_length / 2^m, m = 1..levels."""
+    return box_length / 2.0 ** np.arange(1, levels + 1)
+
+
+def fit_range(radius, box_length):
+    """The paper's fit range of D_f (text after eq. 4.8): 3R <= eps <= L/2, as (eps_min, eps_max)."""
+    return 3.0 * radius, box_length / 2.0
+
+
+def _in_fit_range(eps, eps_min, eps_max):
+    """Which ``eps`` lie in [eps_min, eps_max], the bounds widened by FIT_RANGE_RTOL."""
+    return (eps >= eps_min * (1.0 - FIT_RANGE_RTOL)) & (eps <= eps_max * (1.0 + FIT_RANGE_RTOL))
+
+
+def fit_box_sizes(box_length, radius, levels):
+    """How many box sizes eps_m = L/2^m (m = 1..levels) :func:`cluster_statistics` fits D_f on,
+    those in 3R <= eps <= L/2; the fit needs at least MIN_FIT_BOX_SIZES."""
+    return int(np.count_nonzero(_in_fit_range(box_sizes(box_length, levels), *fit_range(radius, box_length))))
 
 
 def fractal_dimension(eps, counts, eps_min, eps_max):
     """Least-squares fit of log N = log a - D_f log eps (eq. 4.8); returns (D_f, a).
 
     Only box sizes with eps_min <= eps <= eps_max enter the fit (bounds inclusive with a
-    relative tolerance FIT_RANGE_RTOL). The paper's range is 3R <= eps <= L/2. Raises
-    ValueError when fewer than two box sizes fall in the range.
+    relative tolerance FIT_RANGE_RTOL). The paper's range is :func:`fit_range`. Raises
+    ValueError when fewer than MIN_FIT_BOX_SIZES box sizes fall in the range.
     """
     eps = np.asarray(eps, dtype=np.float64)
     counts = np.asarray(counts, dtype=np.float64)
     if eps.shape != counts.shape or eps.ndim != 1:
         raise ValueError(f"eps and counts must be 1-D of equal length, got {eps.shape}, {counts.shape}")
-    selected = (eps >= eps_min * (1.0 - FIT_RANGE_RTOL)) & (eps <= eps_max * (1.0 + FIT_RANGE_RTOL))
-    if np.count_nonzero(selected) < 2:
+    selected = _in_fit_range(eps, eps_min, eps_max)
+    if np.count_nonzero(selected) < MIN_FIT_BOX_SIZES:
         raise ValueError(
             f"fewer than two box sizes in the fit range {eps_min} <= eps <= {eps_max}"
         )
@@ -380,7 +403,7 @@ def cluster_statistics(positions, radii, box_lower, box_upper, *, contact_factor
     box_length = float(np.max(upper - lower))
     aspect_ratio, orientation = aspect_ratio_and_orientation(x)
     eps, counts = box_counts(x, lower, box_length, box_levels)
-    d_f, prefactor = fractal_dimension(eps, counts, 3.0 * radius, box_length / 2.0)
+    d_f, prefactor = fractal_dimension(eps, counts, *fit_range(radius, box_length))
     return {
         "aspect_ratio": aspect_ratio,
         "orientation": orientation,

@@ -6,7 +6,9 @@ is given a :class:`DecomposedDomain` (the interface is in :mod:`parsim.core.ts.d
 - the box is cut into ``k^d`` tiles, at least twice as wide as the halo a minimisation needs
   (at most ``MAX_TILES_PER_SIDE`` per side); the ranks form a Cartesian grid and each owns a
   block of whole tiles and the spheres whose centres lie in it
-  (:class:`parsim.parallel.decomposition.Decomposition`).  The tiles only say who computes
+  (:class:`parsim.parallel.decomposition.Decomposition`).  A box with fewer tiles per side
+  than the rank grid has ranks along an axis is not decomposed: every rank runs the whole
+  task in one tile, as one process does (the same result, bitwise).  The tiles only say who computes
   what: the minimiser's inner and outer rectangles (section 3.3) are chosen per minimisation
   from the interacting spheres, as on one process, so the physics does not depend on the ranks;
 - after each free flight the spheres migrate to their new owners
@@ -123,15 +125,21 @@ class DecomposedDomain:
         self.traffic = Traffic()
 
     def distribute(self, X, V, tile_side):
-        k = min(MAX_TILES_PER_SIDE, int(self.box_length // (TILE_WIDTH_IN_HALOS * tile_side)))
-        try:
-            self.decomposition = Decomposition(self.comm, self.box_length, self.dimension, max(k, 1))
-        except ValueError as error:
-            raise ValueError(f"the box (L = {self.box_length:g}) is too small to share out among {self.size} "
-                             f"ranks: each rank needs a sub-box at least {TILE_WIDTH_IN_HALOS * tile_side:g} "
-                             f"wide; run it on fewer ranks (parsim run --ranks-per-task)") from error
+        """This rank's spheres, at the start of the run; ``tile_side`` is the halo width of a
+        minimisation, a tile is ``TILE_WIDTH_IN_HALOS`` of them wide."""
+        k = max(1, min(MAX_TILES_PER_SIDE, int(self.box_length // (TILE_WIDTH_IN_HALOS * tile_side))))
+        if k < max(MPI.Compute_dims(self.size, self.dimension)):  # too few tiles for a block per rank
+            self._run_whole()
+            k = 1
+        self.decomposition = Decomposition(self.comm, self.box_length, self.dimension, k)
         mine = np.flatnonzero(self.decomposition.owner_of(X) == self.decomposition.rank)
         return mine.astype(np.int64), X[mine].copy(), V[mine].copy()
+
+    def _run_whole(self):
+        """Every rank runs the whole task on its own, in one tile: nothing is shared."""
+        self.comm = MPI.COMM_SELF
+        self.size = 1
+        self.peers = False
 
     def redistribute(self, global_id, X, V):
         decomposition = self.decomposition

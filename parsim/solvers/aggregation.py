@@ -8,8 +8,10 @@ final configuration.  ``method = "ed"`` is the exact event-driven method,
 ``method`` does not enter the seed, so both start from the same initial condition.
 
 On a group of several ranks (``parsim run --ranks-per-task K``) a TS task is
-decomposed over the group's ranks (:class:`parsim.parallel.tiled.DecomposedDomain`);
-an ED task is serial: the group's rank 0 computes it and the other ranks wait.
+decomposed over the group's ranks (:class:`parsim.parallel.tiled.DecomposedDomain`), or,
+in a box too small for a block of tiles per rank, run whole in one tile on every rank of the
+group (the serial result); an ED task is serial: the group's rank 0 computes it and the other
+ranks wait.
 """
 
 import math
@@ -21,7 +23,7 @@ import numpy as np
 from parsim.core.aggregation_ed import simulate_ed
 from parsim.core.initial import (box_length_for_volume_fraction, isotropic_velocities, lattice_positions,
                                  lattice_sites_per_side, lattice_spacing, uniform_cube_velocities)
-from parsim.core.statistics import cluster_statistics, pair_distribution_grid
+from parsim.core.statistics import MIN_FIT_BOX_SIZES, cluster_statistics, fit_box_sizes, pair_distribution_grid
 from parsim.core.ts import FORMULATIONS, DahaParameters, MinimiserFailure, simulate_ts
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import REQUIRED, Parameter
@@ -142,7 +144,8 @@ def box_length(params: dict) -> float:
 
 
 def check(params: dict) -> None:
-    """Cross-field checks of one parameter point; the lattice must fit (condition 4.2)."""
+    """Cross-field checks of one parameter point; the lattice must fit (condition 4.2) and the
+    box must hold the box sizes the fit of D_f needs."""
     initial = params["initial_condition"]
     if initial == PAPER_INITIAL_CONDITION and params["volume_fraction"] is None:
         raise JobError("volume_fraction is required with initial_condition = 'lattice_isotropic' "
@@ -155,6 +158,22 @@ def check(params: dict) -> None:
         raise JobError(f"the initial lattice does not fit in the box: spacing {spacing:.6g} must exceed the "
                        f"diameter 2R = {2 * params['radius']:.6g} (condition 4.2, L^d > (2R)^d N); "
                        "lower volume_fraction or radius")
+    _check_box_counting(params)
+
+
+def _fits_fractal_dimension(params: dict) -> bool:
+    """Whether the box-counting fit of D_f (:func:`cluster_statistics`) has the box sizes it needs."""
+    return fit_box_sizes(box_length(params), params["radius"], params["box_levels"]) >= MIN_FIT_BOX_SIZES
+
+
+def _check_box_counting(params: dict) -> None:
+    if _fits_fractal_dimension(params):
+        return
+    remedy = ("lower volume_fraction" if params["initial_condition"] == PAPER_INITIAL_CONDITION
+              else "lower radius")
+    raise JobError(f"the box-counting fit of D_f needs at least two box sizes eps = L/2^m with 3R <= eps <= L/2; "
+                   f"this point has L = {box_length(params):.6g}, R = {params['radius']:.6g} (it needs L >= 12R): "
+                   f"raise n_spheres or {remedy}")
 
 
 def coordinates(fixed: dict) -> dict[str, Coordinate]:
@@ -192,8 +211,17 @@ def memory_keys(params: dict) -> tuple[str, ...]:
 
 
 def warm_up_parameters(params: dict) -> dict:
-    """The point with at most WARM_UP_SIDE^d spheres: a full square or cube lattice, which fits wherever N does."""
-    return {**params, "n_spheres": min(params["n_spheres"], WARM_UP_SIDE[params["dimension"]] ** params["dimension"])}
+    """The point with fewer spheres: the smallest full square or cube lattice of at least WARM_UP_SIDE^d
+    spheres whose box holds the box sizes of the fit of D_f, or N if that is fewer.
+
+    A full lattice of at most N spheres fits wherever N does (condition 4.2), and its box
+    grows with its side, so the warm-up point passes :func:`check` when the point does.
+    """
+    n, d = params["n_spheres"], params["dimension"]
+    side = WARM_UP_SIDE[d]
+    while side ** d < n and not _fits_fractal_dimension({**params, "n_spheres": side ** d}):
+        side += 1
+    return {**params, "n_spheres": min(n, side ** d)}
 
 
 @dataclass
