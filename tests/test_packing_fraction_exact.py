@@ -1,0 +1,128 @@
+"""Packing fraction against exact slab volumes: spherical caps, and lenses of overlapping spheres."""
+
+import numpy as np
+import pytest
+
+from parsim.core.sediment import packing_fraction, packing_fraction_profile
+
+
+def volume_below(centre_z, radius, z):
+    """Volume of a sphere below the plane z: integral of pi (r^2 - s^2) ds up to s = z - zc."""
+    s = np.clip(z - centre_z, -radius, radius)
+    return np.pi * (radius**2 * (s + radius) - (s**3 + radius**3) / 3)
+
+
+def exact_fraction(centres, radii, area, z_low, z_high):
+    z = centres[:, 2]
+    return np.sum(volume_below(z, radii, z_high) - volume_below(z, radii, z_low)) / (area * (z_high - z_low))
+
+
+def disjoint_spheres(rng, n_side, layers, pitch, lower_xy):
+    """Spheres of random radii at jittered lattice sites; no two overlap."""
+    i, j, k = np.meshgrid(np.arange(n_side), np.arange(n_side), np.arange(layers), indexing="ij")
+    sites = pitch * (np.column_stack([i.ravel(), j.ravel(), k.ravel()]) + 0.5)
+    radii = rng.uniform(0.2, 0.4, len(sites)) * pitch
+    jitter = rng.uniform(-1, 1, sites.shape) * (0.5 * pitch - radii)[:, None]
+    return sites + jitter + [lower_xy[0], lower_xy[1], 0.0], radii
+
+
+@pytest.mark.parametrize("periodic", [True, False])
+def test_disjoint_spheres_match_the_integral_of_caps(periodic):
+    rng = np.random.default_rng(3)
+    pitch, n_side, layers = 1.0, 6, 8
+    lower = np.array([-2.0, 1.5])
+    x, radii = disjoint_spheres(rng, n_side, layers, pitch, lower)
+    side = pitch * n_side
+    if periodic:  # shift the pile so that spheres cross the lateral sides; their images wrap back in
+        x[:, :2] = lower + np.mod(x[:, :2] - lower + 0.37 * pitch, side)
+    upper = lower + side
+    area = side * side
+    for z_low, z_high in [(1.13, 6.71), (2.0, 2.05), (0.0, 8.0), (-1.0, 0.31)]:
+        phi = packing_fraction(x, radii, lower, upper, z_low, z_high, samples=1000)
+        assert phi == pytest.approx(exact_fraction(x, radii, area, z_low, z_high), abs=1e-5)
+    edges = np.linspace(0.0, 8.3, 37)  # slabs cut through the spheres
+    profile = packing_fraction_profile(x, radii, lower, upper, edges, samples=1000)
+    exact = [exact_fraction(x, radii, area, a, b) for a, b in zip(edges[:-1], edges[1:])]
+    np.testing.assert_allclose(profile, exact, rtol=0, atol=1e-5)
+
+
+def lens_section_area(a, b, d):
+    """Area of the intersection of two discs of radii a, b at centre distance d."""
+    a, b = np.maximum(a, 0.0), np.maximum(b, 0.0)
+    out = np.where(d <= np.abs(a - b), np.pi * np.minimum(a, b) ** 2, 0.0)
+    partial = (d > np.abs(a - b)) & (d < a + b)
+    a, b, d = a[partial], b[partial], np.broadcast_to(d, partial.shape)[partial]
+    ca = np.clip((d * d + a * a - b * b) / (2 * d * a), -1, 1)
+    cb = np.clip((d * d + b * b - a * a) / (2 * d * b), -1, 1)
+    root = np.sqrt(np.maximum((-d + a + b) * (d + a - b) * (d - a + b) * (d + a + b), 0.0))
+    out[partial] = a * a * np.arccos(ca) + b * b * np.arccos(cb) - 0.5 * root
+    return out
+
+
+def lens_slab_volume(ci, cj, r, z_low, z_high, panels=4000):
+    """Volume of the lens of two spheres of radius r inside z_low <= z <= z_high: composite Gauss-Legendre."""
+    top, bottom = min(ci[2], cj[2]) + r, max(ci[2], cj[2]) - r
+    lo, hi = max(z_low, bottom), min(z_high, top)
+    if hi <= lo:
+        return 0.0
+    nodes, weights = np.polynomial.legendre.leggauss(6)
+    a = np.linspace(lo, hi, panels + 1)
+    half = 0.5 * np.diff(a)
+    z = (0.5 * (a[1:] + a[:-1]))[:, None] + half[:, None] * nodes
+    d = np.hypot(*(ci[:2] - cj[:2]))
+    area = lens_section_area(np.sqrt(np.maximum(r * r - (z - ci[2]) ** 2, 0)),
+                             np.sqrt(np.maximum(r * r - (z - cj[2]) ** 2, 0)), d)
+    return float(np.sum(half[:, None] * weights * area))
+
+
+def rods(rng, n_side, layers, r):
+    """Rods of three spheres 1 radius apart, random orientations, on a lattice: only neighbours within a rod overlap."""
+    pitch = 4 * r * (1 + 1e-9)
+    i, j, k = np.meshgrid(np.arange(n_side), np.arange(n_side), np.arange(layers), indexing="ij")
+    centres = pitch * (np.column_stack([i.ravel(), j.ravel(), k.ravel()]) + 0.5)
+    u = rng.normal(size=centres.shape)
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    x = centres[:, None, :] + r * np.array([-1.0, 0.0, 1.0])[None, :, None] * u[:, None, :]
+    return x, pitch * n_side
+
+
+def test_rods_match_caps_minus_lenses():
+    rng = np.random.default_rng(5)
+    r = 0.5
+    x, side = rods(rng, 5, 5, r)
+    spheres = x.reshape(-1, 3)
+    radii = np.full(len(spheres), r)
+    edges = np.linspace(0.3, 9.7, 11)
+    profile = packing_fraction_profile(spheres, radii, (0, 0), (side, side), edges)
+    for k, (z_low, z_high) in enumerate(zip(edges[:-1], edges[1:])):
+        lenses = sum(lens_slab_volume(rod[m], rod[m + 1], r, z_low, z_high) for rod in x for m in range(2))
+        exact = exact_fraction(spheres, radii, side * side, z_low, z_high) - lenses / (side * side * (z_high - z_low))
+        assert profile[k] == pytest.approx(exact, abs=2e-4)
+        if k == 4:
+            bulk = packing_fraction(spheres, radii, (0, 0), (side, side), z_low, z_high)
+            assert bulk == pytest.approx(exact, abs=2e-4)
+
+
+def test_many_overlapping_spheres_of_one_particle_match_a_fine_grid():
+    # Medial balls of a prolate body: every sphere overlaps several others.
+    t = np.linspace(-1.0, 1.0, 9)
+    centres = np.column_stack([1.2 * t, 0.4 * t, 0.3 * t]) + [2.0, 2.0, 2.0]
+    radii = 0.7 * np.sqrt(1.0 - 0.8 * t**2)
+    side, edges = 4.0, np.array([0.5, 1.3, 1.9, 2.1, 2.6, 3.5])
+    profile = packing_fraction_profile(centres, radii, (0, 0), (side, side), edges, samples=200_000)
+    n = 1000  # columns per side; in each column the union of the spheres' chords is exact
+    g = (np.arange(n) + 0.5) / n * side
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    rho2 = (X.ravel()[:, None] - centres[:, 0]) ** 2 + (Y.ravel()[:, None] - centres[:, 1]) ** 2
+    half = np.sqrt(np.maximum(radii**2 - rho2, 0.0))
+    hit = half > 0
+    for k, (z_low, z_high) in enumerate(zip(edges[:-1], edges[1:])):
+        start = np.where(hit, np.clip(centres[:, 2] - half, z_low, z_high), z_high)
+        end = np.where(hit, np.clip(centres[:, 2] + half, z_low, z_high), z_high)
+        order = np.argsort(start, axis=1)
+        start, end = np.take_along_axis(start, order, 1), np.take_along_axis(end, order, 1)
+        reach = np.maximum.accumulate(end, axis=1)
+        previous = np.concatenate([np.full((len(start), 1), z_low), reach[:, :-1]], axis=1)
+        length = np.sum(np.maximum(end - np.maximum(start, previous), 0.0), axis=1)
+        covered = length.mean() / (z_high - z_low)
+        assert profile[k] == pytest.approx(covered, abs=2e-4)
