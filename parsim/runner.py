@@ -65,20 +65,16 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
 
 
 def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
-    """Rank 0: lock and prepare the output folder; the tasks still to run, costliest first."""
+    """Rank 0: lock and prepare the output folder; the tasks still to run, in the job's order."""
     check_output_location(folder.root)
     folder.create()
     lock.acquire()
     try:
         folder.prepare(job, _stored_job(folder))
-        pending = [task for task in job.tasks() if not folder.is_finished(task)]
+        return [task for task in job.tasks() if not folder.is_finished(task)]
     except BaseException:
         lock.release()
         raise
-    # Costliest first, so that the last tasks to start are short and no rank idles at the end.
-    solver = SOLVERS[job.kind]
-    pending.sort(key=lambda task: -solver.cost(job.point_parameters(task.point)))
-    return pending
 
 
 def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: threading.Lock, comm: MPI.Comm,
@@ -86,6 +82,9 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
     solver = SOLVERS[job.kind]
     _warm_up(job, pending, progress)
     point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
+    # Costliest first, so that the last tasks to start are short and no rank idles at the end; every
+    # rank sorts alike (a stable sort of the same list), so a task index means the same task everywhere.
+    pending = sorted(pending, key=lambda task: -point_costs[task.point])
     to_do = set(pending)
     bar = TaskProgress(job.name, [point_costs[task.point] for task in pending],
                        [point_costs[task.point] for task in job.tasks() if task not in to_do], progress)
