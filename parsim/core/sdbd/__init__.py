@@ -7,11 +7,14 @@ contacts, hangs on one or two, or (FLOOR_STOP) touches the floor.  Frustrated si
 (4.1, trial angle), freezing by infinite cycling (4.2, criterion 34) and simultaneous
 events (4.3) are handled.
 
-Modules: :mod:`.rotation` (eq. 15, eqs. 13-14), :mod:`.events` (event solvers),
-:mod:`.decision` (steepest-descent choice), :mod:`.grid` (sediment grid), :mod:`.fall`
-(the fall search, 3.1), :mod:`.contacts` (contact lists), :mod:`.ties` (simultaneous
-events, 4.3), :mod:`.cycling` (criterion 34 and the creep test, 4.2), :mod:`.overlap`
-(debug overlap measurement), :mod:`.engine` (the deposition loop), :mod:`.constants`.
+Modules, in the order of the loop: :mod:`.engine` (the deposition loop, Fig. 3),
+:mod:`.particle` (the drop and the rigid motions of a particle), :mod:`.decision` (the
+steepest-descent choice), :mod:`.fall` (falling, 3.1), :mod:`.rolling` (rotation on one or
+two contacts, 3.2-3.3), :mod:`.frustration` (the trial rotation, 4.1), :mod:`.cycling`
+(criterion 34 and the creep test, 4.2), :mod:`.ties` (simultaneous events, 4.3); below
+them :mod:`.events` (event solvers), :mod:`.rotation` (eq. 15, eqs. 13-14),
+:mod:`.contacts` (contact lists), :mod:`.grid` (sediment grid), :mod:`.overlap` (debug
+overlap measurement), :mod:`.bundles` (the named bundles of arrays) and :mod:`.constants`.
 
 The public entry point is :func:`deposit`.
 

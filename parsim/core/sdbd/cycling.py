@@ -1,20 +1,56 @@
 """Freezing by infinite cycling (4.2): tests on the recent descents of the centre of mass.
 
-The engine keeps two ring buffers: the last ``HISTORY`` positive decrements of the height
-of the centre of mass (for criterion 34) and the descents of the last ``CREEP_STEPS``
-steps (for the period-free backstop).  When either test holds, every obstacle within
-``CYCLE_CLOSE_GAP`` of the particle is declared a closed contact.
+A :class:`DescentHistory` keeps two ring buffers of the moving particle: the last
+``HISTORY`` positive decrements of the height of its centre of mass (for criterion 34) and
+the descents of its last ``CREEP_STEPS`` steps (for the period-free backstop).  When either
+test holds after a move (:func:`after_move`), every obstacle within ``CYCLE_CLOSE_GAP`` of
+the particle is declared a closed contact (:func:`close_near_obstacles`) and the steepest
+descent goes on with them.
 """
 
-from parsim.core.jit import jit
-from parsim.core.sdbd.constants import CYCLE_CLOSE_GAP
+import numpy as np
 
-__all__ = ["HISTORY", "CREEP_STEPS", "period_detected", "creeping"]
+from parsim.core.jit import jit
+from parsim.core.sdbd.bundles import bundle
+from parsim.core.sdbd.constants import CYCLE_CLOSE_GAP, FLOOR_STOP, K_CYCLING
+from parsim.core.sdbd.contacts import near_contacts
+
+__all__ = [
+    "HISTORY",
+    "CREEP_STEPS",
+    "DescentHistory",
+    "new_descent_history",
+    "forget_descents",
+    "period_detected",
+    "creeping",
+    "close_near_obstacles",
+    "after_move",
+]
 
 #: Positive decrements kept for criterion (34) (enough for cycle_n <= 28 and period 4).
 HISTORY = 32
 #: Steps over which a particle that descends less than CYCLE_CLOSE_GAP is creeping.
 CREEP_STEPS = 24
+
+#: ``decrements`` (HISTORY,) the positive decrements of the height of the centre of mass,
+#: ``recent`` (CREEP_STEPS,) the descents of the last steps (0 for a rise), both ring
+#: buffers; ``counts`` (2,) how many of each were recorded since the last reset.
+DescentHistory = bundle("DescentHistory", ["decrements", "recent", "counts"], module=__name__)
+_DECREMENTS = 0
+_RECENT = 1
+
+
+@jit
+def new_descent_history():
+    """An empty history."""
+    return DescentHistory(np.empty(HISTORY), np.zeros(CREEP_STEPS), np.zeros(2, dtype=np.int64))
+
+
+@jit(inline="always")
+def forget_descents(history):
+    """Start the history of a new particle."""
+    history.counts[_DECREMENTS] = 0
+    history.counts[_RECENT] = 0
 
 
 @jit
@@ -54,3 +90,54 @@ def creeping(dz_recent, ell):
     for r in range(dz_recent.shape[0]):
         tot += dz_recent[r]
     return tot < CYCLE_CLOSE_GAP * ell
+
+
+@jit(inline="always")
+def close_near_obstacles(n, particle, n_c, contacts, sediment, grid, settings, buf, nrm, event_counts):
+    """4.2: declare closed every obstacle within ``CYCLE_CLOSE_GAP`` (:func:`near_contacts`),
+    counted as a cycling interruption when that adds a contact.  Returns
+    ``(n_c, closed, stop, buf)``: ``stop`` when a floor contact immobilises the particle
+    (FLOOR_STOP)."""
+    n_c, added, floor_added, buf = near_contacts(n, particle, n_c, contacts, sediment, grid,
+                                                 settings.r_max_sed, settings.walls, settings.ell,
+                                                 buf, nrm)
+    if added > 0:
+        event_counts[K_CYCLING] += 1
+    return n_c, added > 0, floor_added and settings.floor_mode == FLOOR_STOP, buf
+
+
+@jit(inline="always")
+def after_move(descent, history, n, particle, n_c, contacts, sediment, grid, settings, buf, nrm,
+               event_counts):
+    """The cycling tests after a move that lowered the centre of mass by ``descent``.
+
+    Criterion (34) on the decrements; then the backstop: the centre of mass went down by
+    less than ``CYCLE_CLOSE_GAP`` in the last ``CREEP_STEPS`` steps, so the particle zigzags
+    among obstacles at clearances of the order of the tolerances.  Either one closes the
+    obstacles near the particle.  Returns ``(n_c, stop, buf)``, ``stop`` when that made a
+    floor contact that immobilises the particle.
+    """
+    decrements = history.decrements
+    recent = history.recent
+    counts = history.counts
+    if descent > 0.0:
+        decrements[counts[_DECREMENTS] % HISTORY] = descent
+        counts[_DECREMENTS] += 1
+        if period_detected(decrements, counts[_DECREMENTS], settings.cycle_n, settings.cycle_eps):
+            n_c, closed, stop, buf = close_near_obstacles(n, particle, n_c, contacts, sediment, grid,
+                                                          settings, buf, nrm, event_counts)
+            if closed:
+                forget_descents(history)
+            if stop:
+                return n_c, True, buf
+    recent[counts[_RECENT] % CREEP_STEPS] = max(descent, 0.0)
+    counts[_RECENT] += 1
+    if counts[_RECENT] >= CREEP_STEPS and creeping(recent, settings.ell):
+        n_c, closed, stop, buf = close_near_obstacles(n, particle, n_c, contacts, sediment, grid,
+                                                      settings, buf, nrm, event_counts)
+        counts[_RECENT] = 0
+        if closed:
+            counts[_DECREMENTS] = 0
+        if stop:
+            return n_c, True, buf
+    return n_c, False, buf

@@ -1,14 +1,15 @@
 """Steepest-descent decision: which motion a particle with given contacts follows.
 
-Contacts are given by their geometry arrays (``n_c`` rows used):
+Contacts are given by their :class:`.bundles.ContactGeometry` (``n_c`` rows used); the
+functions below name its fields as the paper's symbols:
 
-``ca``   centre of the moving sphere of the contact
-``cP``   pivot: the sediment sphere's centre (minimum image), or for the floor and a wall
-         the moving sphere's own centre (the plane holds it; see the engine docs)
-``cN``   unit contact normal pointing from the obstacle to the moving sphere
-``ckind`` obstacle kind (``OB_SPHERE``, ``OB_FLOOR``, ``OB_WALL_*``)
-``cD``   sum of radii (sphere contacts)
-``cc0``  plane level: the moving sphere's centre must satisfy ``N . a >= c0``
+``ca``   (``centre``) centre of the moving sphere of the contact
+``cP``   (``pivot``) the sediment sphere's centre (minimum image), or for the floor and a
+         wall the moving sphere's own centre (the plane holds it; see the engine docs)
+``cN``   (``normal``) unit contact normal pointing from the obstacle to the moving sphere
+``ckind`` (``kind``) obstacle kind (``OB_SPHERE``, ``OB_FLOOR``, ``OB_WALL_*``)
+``cD``   (``reach``) sum of radii (sphere contacts)
+``cc0``  (``level``) plane level: the moving sphere's centre must satisfy ``N . a >= c0``
 
 The candidate motions are those of the paper (Fig. 2, 3.2, 3.3):
 
@@ -38,6 +39,7 @@ is valid, so that measure-zero symmetric drops do not balance forever.
 import math
 
 from parsim.core.jit import jit
+from parsim.core.sdbd.bundles import geometry_arrays
 from parsim.core.sdbd.constants import (
     DESCENT_TOL,
     MOTION_FALL,
@@ -123,13 +125,15 @@ def _pair_axis(cP, k, m, ell):
 
 
 @jit
-def decide(com, n_c, ca, cP, cN, ckind, cD, cc0, ell, out):
-    """Choose the motion; returns ``(motion, k, m, slope)``.
+def decide(com, n_c, geometry, ell, out):
+    """Choose the motion of a particle with centre of mass ``com`` and ``n_c`` contacts of
+    the given geometry; returns ``(motion, k, m, slope)``.
 
     For a rotation, ``out[0:3]`` is the unit axis (rotation sense: positive angle) and
     ``out[3:6]`` a point of it (the pivot ``P_k``); ``k`` (and ``m`` for a pair) are the
     pivot contacts, ``-1`` otherwise.
     """
+    ca, cP, cN, cD, cc0, ckind = geometry_arrays(geometry)
     if n_c == 0:
         return MOTION_FALL, -1, -1, 1.0
     fall = True

@@ -1,22 +1,71 @@
-"""The potential events of a fall (3.1): the drops at which a sphere of the particle
-touches the floor or a sediment sphere (eqs. 1-2)."""
+"""The fall (3.1): the particle translates straight down until one of its spheres touches the
+floor or a sediment sphere (eqs. 1-2); every contact made at the smallest drop is
+established (4.3)."""
 
 import math
 
 import numpy as np
 
 from parsim.core.jit import jit
-from parsim.core.sdbd.constants import EV_CONTACT, OB_FLOOR, OB_SPHERE, SIMULTANEOUS_TOL, TOUCH_TOL
+from parsim.core.sdbd.bundles import grid_arrays, window_arrays
+from parsim.core.sdbd.constants import (
+    EV_CONTACT,
+    K_FALL_CONTACT,
+    K_FLOOR_CONTACT,
+    OB_FLOOR,
+    OB_SPHERE,
+    SIMULTANEOUS_TOL,
+    TOUCH_TOL,
+)
+from parsim.core.sdbd.contacts import add_contact, copy_contact
 from parsim.core.sdbd.events import fall_drop
 from parsim.core.sdbd.grid import column_lookup, column_range, min_image
 from parsim.core.sdbd.ties import push_event
 
-__all__ = ["fall_events"]
+__all__ = ["fall", "fall_events"]
 
 
-@jit
-def fall_events(n, pos, rad, sed, sed_r, geom, igeom, head, col_top, nxt, hkeys, hval,
-                r_max_sed, ell, t_phi, t_c, t_s, t_ev, t_i, t_ob, t_j, t_sh):
+@jit(inline="always")
+def fall(n, particle, n_c, work, sediment, grid, settings, event_counts):
+    """Let the particle of ``n`` spheres fall (3.1).
+
+    The ``n_c`` present contacts become the released ones (a fall leaves them all), the
+    particle moves down by the smallest drop, and the contacts made at that drop are the new
+    contacts, counted in ``event_counts`` as fall or floor contacts.  Returns ``(n_c, n_dr,
+    n_made, floor_hit, n_t, drop)``: contacts and released contacts, contacts made, whether
+    one is the floor, and the event window's rows and drop (for the trace).
+    """
+    contacts = work.contacts
+    window = work.window
+    angle, _, _, _, sphere, obstacle, sediment_sphere, shift = window_arrays(window)
+    pos = particle.centre
+    n_dr = n_c
+    for l in range(n_c):
+        copy_contact(contacts, l, work.released, l)
+    n_t, drop, tol = fall_events(n, particle, sediment, grid, settings.r_max_sed, settings.ell, window)
+    particle.com[2] -= drop
+    for i in range(n):
+        pos[i, 2] -= drop
+    # the contacts are those made at the smallest drop (4.3)
+    n_c = 0
+    n_made = 0
+    floor_hit = False
+    for r in range(n_t):
+        if angle[r] > drop + tol:
+            continue
+        n_c = add_contact(n_c, contacts, sphere[r], obstacle[r], sediment_sphere[r], shift[r, 0],
+                          shift[r, 1])
+        n_made += 1
+        if obstacle[r] == OB_FLOOR:
+            floor_hit = True
+            event_counts[K_FLOOR_CONTACT] += 1
+        else:
+            event_counts[K_FALL_CONTACT] += 1
+    return n_c, n_dr, n_made, floor_hit, n_t, drop
+
+
+@jit(inline="always")
+def fall_events(n, particle, sediment, grid, r_max_sed, ell, window):
     """Fill the event window (:mod:`.ties`) with the smallest drop of the falling particle
     and those within ``tolz = SIMULTANEOUS_TOL * ell`` of it; returns ``(n_t, best, tolz)``,
     ``best`` the drop.
@@ -25,6 +74,11 @@ def fall_events(n, pos, rad, sed, sed_r, geom, igeom, head, col_top, nxt, hkeys,
     scanned from their top layer down (the height map), and a column stops as soon as a
     layer lies below the best drop found, so the cost does not grow with the pile.
     """
+    pos = particle.centre
+    rad = particle.radius
+    sed = sediment.centre
+    sed_r = sediment.radius
+    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
     cell = geom[6]
     tolz = SIMULTANEOUS_TOL * ell
     best = np.inf
@@ -33,8 +87,7 @@ def fall_events(n, pos, rad, sed, sed_r, geom, igeom, head, col_top, nxt, hkeys,
     n_t = 0
     for i in range(n):
         d = pos[i, 2] - rad[i]
-        n_t, best = push_event(n_t, best, tolz, d, 1.0, 0.0, EV_CONTACT, i, OB_FLOOR, -1, 0.0, 0.0,
-                               t_phi, t_c, t_s, t_ev, t_i, t_ob, t_j, t_sh)
+        n_t, best = push_event(n_t, best, tolz, d, 1.0, 0.0, EV_CONTACT, i, OB_FLOOR, -1, 0.0, 0.0, window)
     for i in range(n):
         reach = rad[i] + r_max_sed
         xi = pos[i, 0]
@@ -79,8 +132,7 @@ def fall_events(n, pos, rad, sed, sed_r, geom, igeom, head, col_top, nxt, hkeys,
                                 if dz < 0.0:
                                     dz = 0.0
                                 n_t, best = push_event(n_t, best, tolz, dz, 1.0, 0.0, EV_CONTACT,
-                                                       i, OB_SPHERE, j, mx - rx, my - ry,
-                                                       t_phi, t_c, t_s, t_ev, t_i, t_ob, t_j, t_sh)
+                                                       i, OB_SPHERE, j, mx - rx, my - ry, window)
                             j = nxt[j]
                         iz -= 1
     return n_t, best, tolz

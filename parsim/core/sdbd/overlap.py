@@ -6,16 +6,21 @@ import math
 import numpy as np
 
 from parsim.core.jit import jit
+from parsim.core.sdbd.bundles import grid_arrays
 from parsim.core.sdbd.grid import grid_collect_growing, min_image
 
 __all__ = ["max_overlap"]
 
 
 @jit
-def max_overlap(n, pos, rad, sed, sed_r, geom, igeom, head, col_top, nxt, hkeys, hval,
-                r_max_sed, lateral_walls, buf):
+def max_overlap(n, particle, sediment, grid, r_max_sed, lateral_walls, buf):
     """Largest overlap of the moving spheres with the sediment, the floor and walls;
     returns it and the (possibly grown) query buffer."""
+    pos = particle.centre
+    rad = particle.radius
+    sed = sediment.centre
+    sed_r = sediment.radius
+    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
     worst = -np.inf
     for i in range(n):
         reach = rad[i] + r_max_sed

@@ -2,52 +2,62 @@
 
 Every potential event of a move (the drop of a fall, or the angle of a rotation) is
 offered to :func:`push_event`, which keeps those within ``tol`` of the smallest so far: at
-the end the window holds the earliest event and every event simultaneous with it.
-
-The window is a set of arrays of ``MAX_TIES`` rows, row ``r`` one event: ``t_phi`` (drop or
-angle), ``t_c, t_s`` (cos and sin of the angle), ``t_ev`` (``EV_*``) and the contact it
-makes, ``t_i, t_ob, t_j`` and the image shift ``t_sh`` (2,) (see :mod:`.contacts`).
+the end the window (an :class:`.bundles.EventWindow` of ``MAX_TIES`` rows) holds the
+earliest event and every event simultaneous with it.
 """
 
 from parsim.core.jit import jit
+from parsim.core.sdbd.bundles import window_arrays
 
-__all__ = ["push_event"]
+__all__ = ["push_event", "earliest_event"]
 
 
-@jit
-def push_event(n_t, best, tol, phi, c, s, ev, i, ob, j, sh0, sh1,
-               t_phi, t_c, t_s, t_ev, t_i, t_ob, t_j, t_sh):
+@jit(inline="always")
+def push_event(n_t, best, tol, phi, c, s, ev, i, ob, j, sh0, sh1, window):
     """Add a potential event if it can still be among the earliest; returns ``(n_t, best)``
-    (``best`` the smallest ``phi`` so far)."""
+    (``best`` the smallest ``phi`` so far).  The event has drop or angle ``phi`` with
+    cosine and sine ``c, s``, kind ``ev`` and makes the contact ``(i, ob, j, (sh0, sh1))``."""
     if phi > best + tol:
         return n_t, best
+    angle, cos, sin, kind, sphere, obstacle, sediment, shift = window_arrays(window)
     if phi < best:
         best = phi
         # drop entries that fell out of the window
         w = 0
         for r in range(n_t):
-            if t_phi[r] <= best + tol:
+            if angle[r] <= best + tol:
                 if w != r:
-                    t_phi[w] = t_phi[r]
-                    t_c[w] = t_c[r]
-                    t_s[w] = t_s[r]
-                    t_ev[w] = t_ev[r]
-                    t_i[w] = t_i[r]
-                    t_ob[w] = t_ob[r]
-                    t_j[w] = t_j[r]
-                    t_sh[w, 0] = t_sh[r, 0]
-                    t_sh[w, 1] = t_sh[r, 1]
+                    angle[w] = angle[r]
+                    cos[w] = cos[r]
+                    sin[w] = sin[r]
+                    kind[w] = kind[r]
+                    sphere[w] = sphere[r]
+                    obstacle[w] = obstacle[r]
+                    sediment[w] = sediment[r]
+                    shift[w, 0] = shift[r, 0]
+                    shift[w, 1] = shift[r, 1]
                 w += 1
         n_t = w
-    if n_t >= t_phi.shape[0]:
+    if n_t >= angle.shape[0]:
         return n_t, best
-    t_phi[n_t] = phi
-    t_c[n_t] = c
-    t_s[n_t] = s
-    t_ev[n_t] = ev
-    t_i[n_t] = i
-    t_ob[n_t] = ob
-    t_j[n_t] = j
-    t_sh[n_t, 0] = sh0
-    t_sh[n_t, 1] = sh1
+    angle[n_t] = phi
+    cos[n_t] = c
+    sin[n_t] = s
+    kind[n_t] = ev
+    sphere[n_t] = i
+    obstacle[n_t] = ob
+    sediment[n_t] = j
+    shift[n_t, 0] = sh0
+    shift[n_t, 1] = sh1
     return n_t + 1, best
+
+
+@jit(inline="always")
+def earliest_event(n_t, window):
+    """Row of the smallest angle among the first ``n_t`` rows (the first of equals)."""
+    angle = window.angle
+    r_best = 0
+    for r in range(n_t):
+        if angle[r] < angle[r_best]:
+            r_best = r
+    return r_best

@@ -1,0 +1,85 @@
+"""The moving particle (a :class:`.bundles.Particle`): its drop, and its rigid motions.
+
+The particle is rigid: its state is the centre of mass and the orientation, and the sphere
+centres follow as ``centre_i = com + R body_i``.
+"""
+
+from parsim.core.jit import jit
+from parsim.core.sdbd.constants import DROP_MARGIN
+from parsim.core.sdbd.rotation import (
+    quat_from_axis_cos_sin,
+    quat_mul,
+    quat_normalize,
+    quat_to_matrix,
+    rotate_point,
+)
+
+__all__ = ["place_spheres", "drop_particle", "rotate_particle"]
+
+
+@jit(inline="always")
+def place_spheres(n, particle):
+    """Sphere centres ``com + R body`` of the particle's ``n`` spheres."""
+    body = particle.body
+    rot = particle.rotation
+    com = particle.com
+    pos = particle.centre
+    for i in range(n):
+        for k in range(3):
+            pos[i, k] = com[k] + rot[k, 0] * body[i, 0] + rot[k, 1] * body[i, 1] + rot[k, 2] * body[i, 2]
+
+
+@jit(inline="always")
+def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+                  particle_rotation, particle_drop_xy, top_z, ell, particle):
+    """Particle ``p`` at its drop: scaled body offsets and radii, orientation, centre of mass
+    above its drop point with its lowest sphere ``DROP_MARGIN`` above the top of the sediment
+    ``top_z``; returns its number of spheres."""
+    body = particle.body
+    rad = particle.radius
+    q = particle.quaternion
+    rot = particle.rotation
+    com = particle.com
+    s = particle_shape[p]
+    sc = particle_scale[p]
+    i0 = shape_start[s]
+    n = shape_start[s + 1] - i0
+    for i in range(n):
+        for k in range(3):
+            body[i, k] = sc * shape_offsets[i0 + i, k]
+        rad[i] = sc * shape_radii[i0 + i]
+    for k in range(4):
+        q[k] = particle_rotation[p, k]
+    quat_normalize(q)
+    quat_to_matrix(q, rot)
+    below = 0.0
+    for i in range(n):
+        zi = rot[2, 0] * body[i, 0] + rot[2, 1] * body[i, 1] + rot[2, 2] * body[i, 2]
+        below = max(below, rad[i] - zi)
+    com[0] = particle_drop_xy[p, 0]
+    com[1] = particle_drop_xy[p, 1]
+    com[2] = top_z + below + DROP_MARGIN * ell
+    place_spheres(n, particle)
+    return n
+
+
+@jit(inline="always")
+def rotate_particle(n, particle, axis, pivot, c, s, scratch):
+    """Rotate the particle by the angle of cosine ``c`` and sine ``s`` about ``axis`` through
+    ``pivot`` (eq. 15 for the centre of mass, the same rotation composed with the
+    orientation)."""
+    com = particle.com
+    q = particle.quaternion
+    point = scratch.point
+    q_step = scratch.q_step
+    q_new = scratch.q_new
+    rotate_point(com, pivot, axis, c, s, point)
+    for k in range(3):
+        com[k] = point[k]
+    quat_from_axis_cos_sin(axis, c, s, q_step)
+    quat_mul(q_step, q, q_new)
+    for k in range(4):
+        q[k] = q_new[k]
+    quat_normalize(q)
+    quat_to_matrix(q, particle.rotation)
+    place_spheres(n, particle)

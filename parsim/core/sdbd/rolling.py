@@ -1,0 +1,441 @@
+"""Rolling: the rotation of the particle on one contact (3.2) or on two (3.3), up to its
+earliest event.
+
+The decision gives the axis and a point of it (a pivot).  The potential events of the
+rotation, each an angle ``phi`` about the axis, are
+
+* the end of the arc: hanging (eqs. 18, 32), the centre of mass at the lowest point of its
+  circle, or, if that is farther, the end of an angular chunk in which no sphere moves more
+  than ``CHUNK_CELLS`` grid cells (a bookkeeping step, not an event, so that every grid
+  query covers only the cells within reach of the arc of one sphere);
+* loss of a pivot contact (:func:`_loss_events`): its moving sphere comes level with its
+  sediment sphere (eq. 17; on two pivots only if then the other one is level or below,
+  3.3.4);
+* on two pivots, rolling on one of them becomes possible (:func:`_release_events`, eqs.
+  25-30 and the virtual small rotation of eq. 31);
+* the frustrated situation of 4.1 (:func:`.frustration.decision_changes`);
+* a new contact of any moving sphere (:func:`_new_contact_events`) with a sediment sphere
+  (circle intersections, eqs. 7-12), with the floor (eqs. 19-23) or with a wall (the same,
+  vertical planes).
+
+The earliest event and those within ``SIMULTANEOUS_TOL`` of arc length of it are executed
+together (4.3): the particle turns by eq. 15 and the pivots and the contacts made are its new
+contacts.  Rolling on one and on two pivots share this search; only the loss condition and the
+release events tell them apart.
+"""
+
+import math
+
+import numpy as np
+
+from parsim.core.jit import jit
+from parsim.core.sdbd.bundles import geometry_arrays, grid_arrays, window_arrays
+from parsim.core.sdbd.constants import (
+    CHUNK_CELLS,
+    CYCLE_CLOSE_GAP,
+    EV_CHUNK,
+    EV_CONTACT,
+    EV_HANG,
+    EV_LOSS,
+    EV_RELEASE,
+    EV_TRIAL,
+    EV_VIRTUAL,
+    K_FLOOR_CONTACT,
+    K_FRUSTRATED,
+    K_HANGING_ONE,
+    K_HANGING_TWO,
+    K_LOSS_OF_CONTACT,
+    K_LOSS_OF_ONE,
+    K_LOSS_OF_TWO,
+    K_SECOND_CONTACT,
+    K_THIRD_CONTACT,
+    K_WALL_CONTACT,
+    MOTION_SINGLE,
+    NZ_TOL,
+    OB_FLOOR,
+    OB_SPHERE,
+    OB_WALL_XLO,
+    RATE_TOL,
+    SIMULTANEOUS_TOL,
+    TINY,
+    TOUCH_TOL,
+)
+from parsim.core.sdbd.contacts import add_contact, copy_contact, find_contact, plane_of
+from parsim.core.sdbd.events import (
+    POLICY_NEW,
+    POLICY_TRUSTED,
+    arc_range,
+    first_entry,
+    hang_cos_sin,
+    plane_coefficients,
+    release_plane,
+)
+from parsim.core.sdbd.frustration import decision_changes
+from parsim.core.sdbd.grid import grid_collect, min_image
+from parsim.core.sdbd.particle import rotate_particle
+from parsim.core.sdbd.rotation import rotate_point
+from parsim.core.sdbd.ties import earliest_event, push_event
+
+__all__ = ["roll"]
+
+
+@jit(inline="always")
+def roll(n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_counts, buf):
+    """Rotate the particle of ``n`` spheres on contact ``k`` (``MOTION_SINGLE``) or on
+    contacts ``k`` and ``m`` (``MOTION_PAIR``) about the axis of the decision up to the
+    earliest event, and make the pivots and the contacts of the executed events the
+    contacts.
+
+    Returns ``(n_c, n_dr, n_executed, n_chunk_ends, floor_hit, n_t, phi, buf)``: contacts,
+    contacts released by the decision, events executed, chunk ends reached, whether a floor
+    contact was made, the event window's rows and angle (for the trace), the query buffer.
+    """
+    window = work.window
+    scratch = work.scratch
+    axis = scratch.axis
+    pivot = scratch.pivot
+    for q in range(3):
+        axis[q] = scratch.decision[q]
+        pivot[q] = scratch.decision[3 + q]
+    n_pivots, n_dr = _pivots_and_released(motion, k, m, n_c, work)
+    n_t, best, tol_phi = _end_of_arc(n, particle, axis, pivot, settings, window)
+    n_t, best = _loss_events(n_pivots, k, m, work, axis, pivot, settings.ell, n_t, best, tol_phi)
+    if n_pivots == 2:
+        n_t, best = _release_events(particle.com, k, m, work, axis, pivot, settings, n_t, best, tol_phi)
+    trial_angle = settings.trial_angle
+    if trial_angle > 0.0 and trial_angle <= best + tol_phi:
+        if decision_changes(motion, n_pivots, k, m, work.geometry, particle.com, axis, pivot,
+                            trial_angle, work, settings.ell):
+            n_t, best = push_event(n_t, best, tol_phi, trial_angle, math.cos(trial_angle),
+                                   math.sin(trial_angle), EV_TRIAL, -1, -1, -1, 0.0, 0.0, window)
+    n_t, best, buf = _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment,
+                                         grid, settings, n_t, best, tol_phi, buf)
+    n_c, n_executed, n_chunk_ends, floor_hit = _execute(n, particle, n_pivots, work, axis, pivot, n_t,
+                                                        best, tol_phi, event_counts)
+    return n_c, n_dr, n_executed, n_chunk_ends, floor_hit, n_t, best, buf
+
+
+@jit(inline="always")
+def _pivots_and_released(motion, k, m, n_c, work):
+    """Copy the pivot contacts ``k`` (and ``m``) and the other contacts (released by the
+    decision) into their lists; returns their numbers."""
+    contacts = work.contacts
+    n_pivots = 1 if motion == MOTION_SINGLE else 2
+    copy_contact(contacts, k, work.pivots, 0)
+    if n_pivots == 2:
+        copy_contact(contacts, m, work.pivots, 1)
+    n_dr = 0
+    for l in range(n_c):
+        if l == k or l == m:
+            continue
+        copy_contact(contacts, l, work.released, n_dr)
+        n_dr += 1
+    return n_pivots, n_dr
+
+
+@jit(inline="always")
+def _end_of_arc(n, particle, axis, pivot, settings, window):
+    """Start the event window with hanging (eqs. 18, 32) or, if that lies beyond it, the end
+    of the angular chunk.  Returns ``(n_t, best, tol_phi)``, ``tol_phi`` the angle of
+    ``SIMULTANEOUS_TOL`` of arc length on the sphere farthest from the axis."""
+    ell = settings.ell
+    pos = particle.centre
+    phi_hang, c_hang, s_hang = hang_cos_sin(particle.com, pivot, axis)
+    rho_max = 0.0
+    for i in range(n):
+        r0 = pos[i, 0] - pivot[0]
+        r1 = pos[i, 1] - pivot[1]
+        r2 = pos[i, 2] - pivot[2]
+        h = r0 * axis[0] + r1 * axis[1] + r2 * axis[2]
+        rr = r0 * r0 + r1 * r1 + r2 * r2 - h * h
+        if rr > rho_max:
+            rho_max = rr
+    rho_max = math.sqrt(max(rho_max, 0.0))
+    if rho_max < ell:
+        rho_max = ell
+    tol_phi = SIMULTANEOUS_TOL * ell / rho_max
+    phi_lim = CHUNK_CELLS * settings.cell / rho_max
+    if phi_lim > math.pi:
+        phi_lim = math.pi
+    n_t = 0
+    best = np.inf
+    if phi_hang <= phi_lim:
+        n_t, best = push_event(n_t, best, tol_phi, phi_hang, c_hang, s_hang, EV_HANG, -1, -1, -1,
+                               0.0, 0.0, window)
+    else:
+        n_t, best = push_event(n_t, best, tol_phi, phi_lim, math.cos(phi_lim), math.sin(phi_lim),
+                               EV_CHUNK, -1, -1, -1, 0.0, 0.0, window)
+    return n_t, best, tol_phi
+
+
+@jit(inline="always")
+def _loss_events(n_pivots, k, m, work, axis, pivot, ell, n_t, best, tol_phi):
+    """Loss of a pivot contact: its moving sphere comes level with its sediment sphere
+    (eq. 17); on two pivots only if the other one is then level or below (3.3.4)."""
+    window = work.window
+    ca, cP, cN, cD, _, ckind = geometry_arrays(work.geometry)
+    scratch = work.scratch
+    e1 = scratch.e1
+    e2 = scratch.e2
+    nrm = scratch.normal
+    point = scratch.point
+    for t in range(n_pivots):
+        l = k if t == 0 else m
+        if ckind[l] != OB_SPHERE:
+            continue
+        nrm[0] = 0.0
+        nrm[1] = 0.0
+        nrm[2] = 1.0
+        A, B, K, rho, gap = plane_coefficients(ca[l], pivot, axis, nrm, cP[l, 2], e1, e2)
+        if rho == 0.0 or gap <= NZ_TOL * cD[l]:
+            # level or below already: that crossing is not ahead
+            continue
+        phi, cc, ss = first_entry(A, B, K, gap, 1.0 / rho, ell, POLICY_TRUSTED)
+        if phi > best + tol_phi:
+            continue
+        if n_pivots == 2:
+            o = m if t == 0 else k
+            if ckind[o] == OB_SPHERE:
+                rotate_point(ca[o], pivot, axis, cc, ss, point)
+                nz = point[2] - cP[o, 2]
+                dn = math.sqrt((point[0] - cP[o, 0]) ** 2 + (point[1] - cP[o, 1]) ** 2 + nz * nz)
+                if nz > NZ_TOL * dn:
+                    continue
+            elif cN[o, 2] > NZ_TOL:
+                continue
+        n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_LOSS, l, -1, -1, 0.0, 0.0, window)
+    return n_t, best
+
+
+@jit(inline="always")
+def _release_events(com, k, m, work, axis, pivot, settings, n_t, best, tol_phi):
+    """On two pivots: rolling on one of them alone becomes possible (eqs. 25-30, the plane
+    of :func:`.events.release_plane`).  When the release condition already holds with zero
+    rate, the virtual small rotation of eq. 31 is the event."""
+    ell = settings.ell
+    window = work.window
+    ca, cP, cN, _, _, ckind = geometry_arrays(work.geometry)
+    scratch = work.scratch
+    e1 = scratch.e1
+    e2 = scratch.e2
+    nrm2 = scratch.normal_2
+    virtual = settings.virtual_angle
+    for t in range(2):
+        x = k if t == 0 else m
+        y = m if t == 0 else k
+        ok, use_com, c0, gap0 = release_plane(com, cP[x], cP[y], ca[y], ckind[y] == OB_SPHERE, cN[y], nrm2)
+        if not ok:
+            continue
+        if use_com:
+            A, B, K, rho, gap = plane_coefficients(com, pivot, axis, nrm2, c0, e1, e2)
+        else:
+            A, B, K, rho, gap = plane_coefficients(ca[y], pivot, axis, nrm2, c0, e1, e2)
+        if rho == 0.0:
+            continue
+        if abs(gap) <= TOUCH_TOL * ell:
+            if B > RATE_TOL * ell / rho:
+                # eq. 31: release condition holds with zero rate and the decision found the
+                # contact not opening: rotate a little
+                n_t, best = push_event(n_t, best, tol_phi, virtual, math.cos(virtual),
+                                       math.sin(virtual), EV_VIRTUAL, -1, -1, -1, 0.0, 0.0, window)
+                continue
+        elif gap < 0.0:
+            continue
+        phi, cc, ss = first_entry(A, B, K, gap, 1.0 / rho, ell, POLICY_TRUSTED)
+        if phi <= best + tol_phi:
+            n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_RELEASE, x, -1, -1, 0.0, 0.0, window)
+    return n_t, best
+
+
+@jit(inline="always")
+def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment, grid, settings,
+                        n_t, best, tol_phi, buf):
+    """New contacts of every moving sphere with the floor (eqs. 19-23), the walls (the same,
+    vertical planes) and the sediment spheres (eqs. 7-12).  A contact released by the
+    decision is trusted to open (``POLICY_TRUSTED`` of :func:`.events.first_entry`); a
+    pivot cannot be made again."""
+    window = work.window
+    ell = settings.ell
+    pos = particle.centre
+    rad = particle.radius
+    sed = sediment.centre
+    sed_r = sediment.radius
+    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
+    walls = settings.walls
+    reach_sed = settings.r_max_sed
+    pivots = work.pivots
+    released = work.released
+    scratch = work.scratch
+    e1 = scratch.e1
+    e2 = scratch.e2
+    nrm = scratch.normal
+    for i in range(n):
+        r0 = pos[i, 0] - pivot[0]
+        r1 = pos[i, 1] - pivot[1]
+        r2 = pos[i, 2] - pivot[2]
+        h = r0 * axis[0] + r1 * axis[1] + r2 * axis[2]
+        p0 = r0 - h * axis[0]
+        p1 = r1 - h * axis[1]
+        p2 = r2 - h * axis[2]
+        rho = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+        if rho <= TINY * ell:
+            continue
+        # the sphere's centre moves on the circle o + rho (cos phi e1 + sin phi e2)
+        e1[0] = p0 / rho
+        e1[1] = p1 / rho
+        e1[2] = p2 / rho
+        e2[0] = axis[1] * e1[2] - axis[2] * e1[1]
+        e2[1] = axis[2] * e1[0] - axis[0] * e1[2]
+        e2[2] = axis[0] * e1[1] - axis[1] * e1[0]
+        lim = best + tol_phi
+        if lim > math.pi:
+            lim = math.pi
+        o0 = pivot[0] + h * axis[0]
+        o1 = pivot[1] + h * axis[1]
+        o2 = pivot[2] + h * axis[2]
+        xlo, xhi = arc_range(rho, e1[0], e2[0], lim)
+        ylo, yhi = arc_range(rho, e1[1], e2[1], lim)
+        zlo, zhi = arc_range(rho, e1[2], e2[2], lim)
+        ri = rad[i]
+        # floor
+        if o2 + zlo - ri <= TOUCH_TOL * ell:
+            if find_contact(n_pivots, pivots, i, OB_FLOOR, -1) < 0:
+                pol = POLICY_TRUSTED if find_contact(n_dr, released, i, OB_FLOOR, -1) >= 0 else POLICY_NEW
+                A = -e1[2]
+                B = -e2[2]
+                gap = pos[i, 2] - ri
+                phi, cc, ss = first_entry(A, B, A + gap / rho, gap, 1.0 / rho, ell, pol)
+                if phi <= best + tol_phi:
+                    n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, OB_FLOOR, -1,
+                                           0.0, 0.0, window)
+        if walls:
+            for wdir in range(4):
+                ob = OB_WALL_XLO + wdir
+                c0 = plane_of(ob, ri, geom, nrm)
+                if wdir == 0:
+                    near = o0 + xlo - ri - geom[0]
+                elif wdir == 1:
+                    near = geom[0] + geom[2] - (o0 + xhi + ri)
+                elif wdir == 2:
+                    near = o1 + ylo - ri - geom[1]
+                else:
+                    near = geom[1] + geom[3] - (o1 + yhi + ri)
+                if near > TOUCH_TOL * ell:
+                    continue
+                if find_contact(n_pivots, pivots, i, ob, -1) >= 0:
+                    continue
+                pol = POLICY_TRUSTED if find_contact(n_dr, released, i, ob, -1) >= 0 else POLICY_NEW
+                A = -(nrm[0] * e1[0] + nrm[1] * e1[1])
+                B = -(nrm[0] * e2[0] + nrm[1] * e2[1])
+                gap = nrm[0] * pos[i, 0] + nrm[1] * pos[i, 1] - c0
+                phi, cc, ss = first_entry(A, B, A + gap / rho, gap, 1.0 / rho, ell, pol)
+                if phi <= best + tol_phi:
+                    n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, ob, -1,
+                                           0.0, 0.0, window)
+        # sediment spheres (the most frequent grid query: grid_collect here rather than
+        # grid_collect_growing, measured 8% faster)
+        reach = ri + reach_sed
+        while True:
+            cnt = grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, o0 + xlo - reach, o0 + xhi + reach, o1 + ylo - reach, o1 + yhi + reach,
+                               o2 + zlo - reach, o2 + zhi + reach, buf)
+            if cnt >= 0:
+                break
+            buf = np.empty(2 * buf.shape[0], dtype=np.int64)
+        for qq in range(cnt):
+            j = buf[qq]
+            rx = sed[j, 0] - pos[i, 0]
+            ry = sed[j, 1] - pos[i, 1]
+            mx, my = min_image(geom, igeom, rx, ry)
+            # obstacle relative to the pivot
+            q0 = pos[i, 0] + mx - pivot[0]
+            q1 = pos[i, 1] + my - pivot[1]
+            q2 = sed[j, 2] - pivot[2]
+            D = ri + sed_r[j]
+            hq = q0 * axis[0] + q1 * axis[1] + q2 * axis[2]
+            if abs(hq - h) >= D:
+                continue
+            A = e1[0] * q0 + e1[1] * q1 + e1[2] * q2
+            B = e2[0] * q0 + e2[1] * q1 + e2[2] * q2
+            dz = sed[j, 2] - pos[i, 2]
+            dist2 = mx * mx + my * my + dz * dz
+            K = A + (dist2 - D * D) / (2.0 * rho)
+            if K > 0.0 and K * K >= A * A + B * B:
+                continue
+            dist = math.sqrt(dist2)
+            gap = dist - D
+            pol = POLICY_NEW
+            if gap <= 2.0 * CYCLE_CLOSE_GAP * ell:
+                if find_contact(n_pivots, pivots, i, OB_SPHERE, j) >= 0:
+                    continue
+                if find_contact(n_dr, released, i, OB_SPHERE, j) >= 0:
+                    pol = POLICY_TRUSTED
+            phi, cc, ss = first_entry(A, B, K, gap, dist / rho, ell, pol)
+            if phi <= best + tol_phi:
+                n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, OB_SPHERE, j,
+                                       mx - rx, my - ry, window)
+    return n_t, best, buf
+
+
+@jit(inline="always")
+def _execute(n, particle, n_pivots, work, axis, pivot, n_t, best, tol_phi, event_counts):
+    """Turn the particle to the earliest event; the pivots and the contacts made by the
+    events within ``tol_phi`` of it (4.3) become the contacts.  Returns ``(n_c, n_executed,
+    n_chunk_ends, floor_hit)``."""
+    window = work.window
+    contacts = work.contacts
+    angle, cos, sin, kind, sphere, obstacle, sediment_sphere, shift = window_arrays(window)
+    r_best = earliest_event(n_t, window)
+    if angle[r_best] > 0.0:
+        rotate_particle(n, particle, axis, pivot, cos[r_best], sin[r_best], work.scratch)
+    n_c = n_pivots
+    for t in range(n_pivots):
+        copy_contact(work.pivots, t, contacts, t)
+    n_executed = 0
+    n_chunk_ends = 0
+    floor_hit = False
+    for r in range(n_t):
+        if angle[r] > best + tol_phi:
+            continue
+        ev = kind[r]
+        if ev == EV_CHUNK:
+            n_chunk_ends += 1
+            continue
+        n_executed += 1
+        ob = obstacle[r]
+        if ev == EV_CONTACT:
+            if find_contact(n_c, contacts, sphere[r], ob, sediment_sphere[r]) < 0:
+                n_c = add_contact(n_c, contacts, sphere[r], ob, sediment_sphere[r], shift[r, 0],
+                                  shift[r, 1])
+            if ob == OB_FLOOR:
+                floor_hit = True
+        _count_event(event_counts, ev, ob, n_pivots)
+    return n_c, n_executed, n_chunk_ends, floor_hit
+
+
+@jit(inline="always")
+def _count_event(event_counts, ev, ob, n_pivots):
+    """Count an executed event of a rotation on ``n_pivots`` pivots by its kind (EVENT_KINDS)."""
+    if ev == EV_CONTACT:
+        if ob == OB_SPHERE:
+            if n_pivots == 1:
+                event_counts[K_SECOND_CONTACT] += 1
+            else:
+                event_counts[K_THIRD_CONTACT] += 1
+        elif ob == OB_FLOOR:
+            event_counts[K_FLOOR_CONTACT] += 1
+        else:
+            event_counts[K_WALL_CONTACT] += 1
+    elif ev == EV_LOSS:
+        if n_pivots == 1:
+            event_counts[K_LOSS_OF_CONTACT] += 1
+        else:
+            event_counts[K_LOSS_OF_TWO] += 1
+    elif ev == EV_RELEASE:
+        event_counts[K_LOSS_OF_ONE] += 1
+    elif ev == EV_HANG:
+        if n_pivots == 1:
+            event_counts[K_HANGING_ONE] += 1
+        else:
+            event_counts[K_HANGING_TWO] += 1
+    elif ev == EV_TRIAL or ev == EV_VIRTUAL:
+        event_counts[K_FRUSTRATED] += 1
