@@ -109,6 +109,8 @@ STATISTICS = (
     Statistic("n_bulk_particles", "1", "particles in the bulk slab", dtype="int64"),
     Statistic("n_spheres", "1", "spheres in the sediment", dtype="int64"),
     Statistic("events_per_particle", "1", "mean number of events per particle"),
+    Statistic("largest_steps_per_particle", "1", "the most decide-and-move steps one particle needed (bounded "
+              "by max_events_per_particle)", dtype="int64"),
     Statistic("frustrated_steps", "1", "trial rotations of frustrated situations (section 4.1)", dtype="int64"),
     Statistic("cycling_interruptions", "1", "interruptions of infinite cycling (section 4.2)", dtype="int64"),
     Statistic("simultaneous_events", "1", "simultaneous events (section 4.3)", dtype="int64"),
@@ -239,6 +241,7 @@ def _statistics(params, result, particle_volume, skip) -> dict:
         "n_bulk_particles": n_bulk,
         "n_spheres": len(result.radii),
         "events_per_particle": float(result.event_counts.sum(axis=1).mean()),
+        "largest_steps_per_particle": int(result.steps.max()),
         "spheres_per_second": counted_spheres / result.clocked_seconds if result.clocked_seconds > 0 else np.nan,
     }
     for name, kind in EVENT_TOTALS.items():
@@ -262,7 +265,7 @@ def _configuration(params, result, scale) -> Configuration:
                 "particles/center_of_mass": result.center_of_mass, "particles/rotation": result.rotation,
                 "particles/shape": np.zeros(len(scale), dtype=np.int64), "particles/scale": scale,
                 "particles/state": result.state, "particles/contacts": result.contacts,
-                "particles/event_counts": result.event_counts},
+                "particles/event_counts": result.event_counts, "particles/steps": result.steps},
         box_lower=np.array([lower[0], lower[1], 0.0]), box_upper=np.array([upper[0], upper[1], top]),
         periodic=np.array([periodic, periodic, False]),
         attrs={"floor_z": 0.0, "event_kinds": list(sdbd.EVENT_KINDS), "state_names": list(sdbd.STATE_NAMES),

@@ -107,6 +107,8 @@ class DepositionResult(NamedTuple):
                    HANGING_TWO; EVENT_LIMIT is the condition of particle ``stopped_at``,
                    which is not included (the arrays hold the particles before it)
     event_counts   (P, len(EVENT_KINDS)) int64 events per particle and kind
+    steps          (P,) int64 decide-and-move steps per particle (at most
+                   ``max_events_per_particle``)
     stopped_at     index of the particle that exceeded ``max_events_per_particle``, or -1
     clocked_seconds  wall-clock seconds spent on particles ``clock_from_particle`` onwards
                    (NaN when no clock was asked for): the paper's efficiency measure
@@ -121,6 +123,7 @@ class DepositionResult(NamedTuple):
     contacts: np.ndarray
     state: np.ndarray
     event_counts: np.ndarray
+    steps: np.ndarray
     stopped_at: int
     clocked_seconds: float
 
@@ -239,13 +242,15 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
 
     counts = np.diff(start)
     n_total = int(np.sum(counts[pshape])) if P else 0
-    # scales: extent of each shape about its centre of mass, largest radius
+    # scales: extent of each shape about its centre of mass, largest radius.  The length scale
+    # of the tolerances is the mean radius of the shapes' spheres at scale 1, and the grid's
+    # first cell the first particle's largest sphere diameter: nothing about a particle's
+    # descent depends on the particles after it
     shape_extent = np.array([np.max(np.linalg.norm(offsets[start[s]:start[s + 1]], axis=1)
                                     + radii[start[s]:start[s + 1]]) for s in range(n_shapes)])
     shape_rmax = np.array([np.max(radii[start[s]:start[s + 1]]) for s in range(n_shapes)])
     if P:
-        ell = float(np.sum(pscale * np.array([np.sum(radii[start[s]:start[s + 1]]) for s in range(n_shapes)])[pshape])
-                    / n_total)
+        ell = float(np.mean(radii))
         r_max = float(np.max(pscale * shape_rmax[pshape]))
         ext_max = float(np.max(pscale * shape_extent[pshape]))
     else:
@@ -284,7 +289,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
         lo = np.zeros(2)
         hi = np.zeros(2)
 
-    cell = 2.0 * r_max
+    cell = 2.0 * pscale[0] * shape_rmax[pshape[0]] if P else 2.0 * r_max
     g = grid.grid_new(lateral, lo, hi, cell, n_total)
     out_pos = np.zeros((n_total, 3))
     out_rad = np.zeros(n_total)
@@ -294,13 +299,14 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     out_contacts = np.zeros(P, dtype=np.int64)
     out_state = np.zeros(P, dtype=np.int64)
     out_events = np.zeros((P, N_EVENT_KINDS), dtype=np.int64)
+    out_steps = np.zeros(P, dtype=np.int64)
     diag = np.full(4, np.nan)
     trace = np.full((max(int(trace_steps), 1), 16), np.nan)
     stopped_at, n_written = engine.run_deposition(
         offsets, radii, start, pshape, pscale, prot, pxy, *g, int(floor), float(trial_angle),
-        int(cycle_n), float(cycle_eps), int(max_events_per_particle), ell, r_max,
-        bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), out_pos, out_rad, out_particle, out_com, out_rot, out_contacts,
-        out_state, out_events, diag)
+        int(cycle_n), float(cycle_eps), int(max_events_per_particle), ell,
+        bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), out_pos, out_rad,
+        out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag)
     n_done = P if stopped_at < 0 else int(stopped_at)
     return DepositionResult(
         positions=out_pos[:n_written],
@@ -311,6 +317,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
         contacts=out_contacts[:n_done].astype(np.int8),
         state=out_state[:n_done].astype(np.int8),
         event_counts=out_events[:n_done],
+        steps=out_steps[:n_done],
         stopped_at=int(stopped_at),
         clocked_seconds=float(diag[3]),
     ), {"max_overlap": float(diag[0]), "steps": int(diag[1]), "chunk_steps": int(diag[2]),

@@ -95,16 +95,18 @@ EventWindow = bundle("EventWindow",
 Sediment = bundle("Sediment", ["centre", "radius"])
 
 #: The neighbour grid of the sediment, the arrays of :mod:`.grid` in its order (``head``,
-#: ``col_top``, ``hkeys`` and ``hval`` are replaced by larger ones as the pile grows).
+#: ``col_top``, ``hkeys`` and ``hval`` are replaced by larger ones as the pile grows, all of
+#: them when a particle with a larger sphere than the cell allows arrives).  Its cell
+#: ``geom[6]`` is the largest sphere diameter so far, so half of it bounds every sediment
+#: radius.
 Grid = bundle("Grid", ["geom", "igeom", "head", "col_top", "nxt", "hkeys", "hval", "counts"])
 
 #: The parameters of a run: floor mode (``FLOOR_*``), trial angle of 4.1 (0: off), the
 #: virtual small rotation of eq. 31, criterion (34)'s ``cycle_n`` and ``cycle_eps``, the
-#: largest number of steps of a particle, the length scale ``ell`` of the tolerances, the
-#: largest sediment radius, whether the box has walls, the grid cell, whether every move is
-#: checked for overlaps.
+#: largest number of steps of a particle, the length scale ``ell`` of the tolerances,
+#: whether the box has walls, whether every move is checked for overlaps.
 Settings = namedtuple("Settings", ["floor_mode", "trial_angle", "virtual_angle", "cycle_n", "cycle_eps",
-                                   "max_events", "ell", "r_max_sed", "walls", "cell", "debug"])
+                                   "max_events", "ell", "walls", "debug"])
 
 #: Three-vectors and small arrays reused by every step: the rotation ``axis`` and a point
 #: ``pivot`` of it, the arc frame ``e1, e2``, plane normals ``normal, normal_2``, a rotated
@@ -124,9 +126,10 @@ Workspace = bundle("Workspace", ["contacts", "geometry", "pivots", "released", "
 #: frame, wrapped into a periodic box), ``radii`` and ``particle`` index; per particle the
 #: centre of mass ``com``, the orientation quaternion ``rotation``, the number of
 #: ``contacts`` and the ``state`` at rest (``RESTING_*``, ``HANGING_*``, ``EVENT_LIMIT``),
-#: and the executed ``events`` by kind (``EVENT_KINDS``).
+#: the executed ``events`` by kind (``EVENT_KINDS``) and the number of decide-and-move
+#: ``steps``.
 Record = bundle("Record", ["positions", "radii", "particle", "com", "rotation", "contacts", "state",
-                               "events"])
+                           "events", "steps"])
 
 
 @jit

@@ -126,6 +126,11 @@ NZ_TOL = 1e-10
 #: A motion whose centre of mass descends with slope -dz/ds <= DESCENT_TOL does not
 #: descend (hanging / rest); dimensionless.
 DESCENT_TOL = 1e-10
+#: A rotation that lowers the centre of mass at a rate -dz/dphi (length per radian) below
+#: DESCENT_RATE_TOL * ell is no motion, whatever its slope: the centre of mass is then on the
+#: rotation axis to round-off (a rod turning about its own axis, ~1e-15 ell), where no angle
+#: lowers it, or straight above it (an unstable equilibrium, tipped by the decision).
+DESCENT_RATE_TOL = 1e-10
 #: Two candidate motions whose slopes differ by less than STEEP_TOL are equally steep;
 #: the first in the fixed order (singles, then pairs, by contact index) is taken.
 STEEP_TOL = 1e-12
@@ -143,10 +148,14 @@ ANGLE_EPS = 1e-10
 VIRTUAL_ANGLE = 1e-6
 #: 4.2: when cycling is detected, every obstacle within CYCLE_CLOSE_GAP * ell of the
 #: particle is declared a closed contact (the paper reports clearances ~1e-8 of the
-#: radius); also the descent over the last 24 steps below which the particle is
-#: considered frozen (creeping), and the clearance below which obstacles count as
-#: contacts when the decision finds rest.
+#: radius); also the clearance below which obstacles count as contacts when the decision
+#: finds rest.
 CYCLE_CLOSE_GAP = 1e-7
+#: 4.2 without a period: a particle whose centre of mass went down by less than
+#: CREEP_DESCENT * ell over its last 24 steps is creeping (a zigzag among obstacles at
+#: clearances of the order of the tolerances, e.g. a rod sliding down a groove in steps of
+#: 1e-8 rad), and the obstacles near it are declared closed.  Harmless when none is near.
+CREEP_DESCENT = 1e-6
 #: Rotations are searched in chunks in which no sphere moves more than CHUNK_CELLS grid
 #: cells, so that each query covers few cells (a chunk end is not a physical event).
 CHUNK_CELLS = 1.5

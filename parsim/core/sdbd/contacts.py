@@ -179,7 +179,7 @@ def keep_touching(n_c, contacts, n_dr, released, particle, sediment, geom, ell, 
 
 
 @jit
-def near_contacts(n, particle, n_c, contacts, sediment, grid, r_max_sed, walls, ell, buf, nrm):
+def near_contacts(n, particle, n_c, contacts, sediment, grid, walls, ell, buf, nrm):
     """Declare closed every obstacle within ``CYCLE_CLOSE_GAP * ell`` of the particle that
     is not a contact yet (4.2).  Returns ``(n_c, added, floor_added, buf)``."""
     pos = particle.centre
@@ -193,7 +193,7 @@ def near_contacts(n, particle, n_c, contacts, sediment, grid, r_max_sed, walls, 
     for i in range(n):
         if n_c >= MAX_CONTACTS:
             break
-        reach = rad[i] + r_max_sed + lim
+        reach = rad[i] + 0.5 * geom[6] + lim
         cnt, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval,
                                         pos[i, 0] - reach, pos[i, 0] + reach, pos[i, 1] - reach,
                                         pos[i, 1] + reach, pos[i, 2] - reach, pos[i, 2] + reach, buf)

@@ -12,7 +12,7 @@ import numpy as np
 
 from parsim.core.jit import jit
 from parsim.core.sdbd.bundles import bundle
-from parsim.core.sdbd.constants import CYCLE_CLOSE_GAP, FLOOR_STOP, K_CYCLING
+from parsim.core.sdbd.constants import CREEP_DESCENT, FLOOR_STOP, K_CYCLING
 from parsim.core.sdbd.contacts import near_contacts
 
 __all__ = [
@@ -29,7 +29,7 @@ __all__ = [
 
 #: Positive decrements kept for criterion (34) (enough for cycle_n <= 28 and period 4).
 HISTORY = 32
-#: Steps over which a particle that descends less than CYCLE_CLOSE_GAP is creeping.
+#: Steps over which a particle that descends less than CREEP_DESCENT is creeping.
 CREEP_STEPS = 24
 
 #: ``decrements`` (HISTORY,) the positive decrements of the height of the centre of mass,
@@ -85,11 +85,11 @@ def period_detected(dz_hist, n_hist, cycle_n, cycle_eps):
 @jit
 def creeping(dz_recent, ell):
     """4.2 without a period: the centre of mass went down by less than
-    ``CYCLE_CLOSE_GAP * ell`` over the steps in ``dz_recent``."""
+    ``CREEP_DESCENT * ell`` over the steps in ``dz_recent``."""
     tot = 0.0
     for r in range(dz_recent.shape[0]):
         tot += dz_recent[r]
-    return tot < CYCLE_CLOSE_GAP * ell
+    return tot < CREEP_DESCENT * ell
 
 
 @jit(inline="always")
@@ -99,8 +99,7 @@ def close_near_obstacles(n, particle, n_c, contacts, sediment, grid, settings, b
     ``(n_c, closed, stop, buf)``: ``stop`` when a floor contact immobilises the particle
     (FLOOR_STOP)."""
     n_c, added, floor_added, buf = near_contacts(n, particle, n_c, contacts, sediment, grid,
-                                                 settings.r_max_sed, settings.walls, settings.ell,
-                                                 buf, nrm)
+                                                 settings.walls, settings.ell, buf, nrm)
     if added > 0:
         event_counts[K_CYCLING] += 1
     return n_c, added > 0, floor_added and settings.floor_mode == FLOOR_STOP, buf
@@ -112,7 +111,7 @@ def after_move(descent, history, n, particle, n_c, contacts, sediment, grid, set
     """The cycling tests after a move that lowered the centre of mass by ``descent``.
 
     Criterion (34) on the decrements; then the backstop: the centre of mass went down by
-    less than ``CYCLE_CLOSE_GAP`` in the last ``CREEP_STEPS`` steps, so the particle zigzags
+    less than ``CREEP_DESCENT`` in the last ``CREEP_STEPS`` steps, so the particle zigzags
     among obstacles at clearances of the order of the tolerances.  Either one closes the
     obstacles near the particle.  Returns ``(n_c, stop, buf)``, ``stop`` when that made a
     floor contact that immobilises the particle.

@@ -30,6 +30,11 @@ the sphere ``|r_cm - P_k| = const``), which is the paper's rule that a newly est
 single contact is preferred (3.2.2).  "Steepest" is measured by the slope of the path of
 the centre of mass, ``-dz/ds``.
 
+A candidate descends when its slope exceeds ``DESCENT_TOL`` and the rate ``-dz/dphi`` of
+the centre of mass exceeds ``DESCENT_RATE_TOL * ell``: a centre of mass on the axis of a
+rotation (a rod on two pivots along its own axis) has a slope made of round-off and no
+rotation about that axis is a motion.
+
 No valid descending candidate means rest: three contacts, or hanging on one / two.  A
 centre of mass exactly above a pivot (or above the axis of two) is an unstable
 equilibrium; the decision then tips it about a fixed horizontal axis (x, then y) if that
@@ -41,6 +46,7 @@ import math
 from parsim.core.jit import jit
 from parsim.core.sdbd.bundles import geometry_arrays
 from parsim.core.sdbd.constants import (
+    DESCENT_RATE_TOL,
     DESCENT_TOL,
     MOTION_FALL,
     MOTION_PAIR,
@@ -103,6 +109,16 @@ def _all_open(n_c, skip1, skip2, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, 
 
 
 @jit
+def _descends(rate, lever, ell):
+    """Does a rotation lower the centre of mass?  ``rate`` is -dz/dphi of the centre of mass
+    for a unit axis, ``lever`` its distance from the axis: both the slope ``rate / lever``
+    and the rate itself must exceed their tolerances (``DESCENT_TOL``, ``DESCENT_RATE_TOL``),
+    so that a centre of mass on the axis to round-off, whose slope is meaningless, is no
+    descent."""
+    return rate > DESCENT_TOL * lever and rate > DESCENT_RATE_TOL * ell
+
+
+@jit
 def _offset_from_pivot(com, cP, k):
     """``d = r_cm - P_k``, its length and the length of its horizontal part."""
     d0 = com[0] - cP[k, 0]
@@ -150,7 +166,7 @@ def decide(com, n_c, geometry, ell, out):
     # rotation on one contact
     for k in range(n_c):
         d0, d1, d2, dn, dh = _offset_from_pivot(com, cP, k)
-        if dn <= TINY * ell or dh <= DESCENT_TOL * dn:
+        if dn <= TINY * ell or not _descends(dh, dn, ell):
             continue
         slope = dh / dn
         if slope <= best + STEEP_TOL:
@@ -179,7 +195,7 @@ def decide(com, n_c, geometry, ell, out):
             x1 = u2 * d0 - u0 * d2
             x2 = u0 * d1 - u1 * d0
             xn = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
-            if xn <= TINY * ell or abs(x2) <= DESCENT_TOL * xn:
+            if xn <= TINY * ell or not _descends(abs(x2), xn, ell):
                 continue
             slope = abs(x2) / xn
             if slope <= best + STEEP_TOL:
@@ -198,7 +214,7 @@ def decide(com, n_c, geometry, ell, out):
         # unstable equilibria: centre of mass straight above a pivot
         for k in range(n_c):
             d0, d1, d2, dn, dh = _offset_from_pivot(com, cP, k)
-            if dn <= TINY * ell or dh > DESCENT_TOL * dn or d2 <= 0.0:
+            if dn <= TINY * ell or _descends(dh, dn, ell) or d2 <= 0.0:
                 continue
             for t in range(4):
                 w0 = 0.0
@@ -235,12 +251,12 @@ def decide(com, n_c, geometry, ell, out):
                 p1 = d1 - h * u1
                 p2 = d2 - h * u2
                 pn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
-                if pn <= TINY * ell:
-                    continue
+                if pn <= DESCENT_RATE_TOL * ell:
+                    continue  # on the axis: no rotation about it lowers the centre of mass
                 x2 = u0 * p1 - u1 * p0  # (u x d)_z
                 # above: the offset from the axis points up (ez . p > 0) and is normal to
                 # the descent direction
-                if abs(x2) > DESCENT_TOL * pn or p2 <= 0.0:
+                if _descends(abs(x2), pn, ell) or p2 <= 0.0:
                     continue
                 for t in range(2):
                     sg = 1.0 if t == 0 else -1.0

@@ -16,7 +16,7 @@ sediment and :func:`_descend` repeats *decide, move* until it rests:
    through them;
 4. **cycling** (4.2, :func:`.cycling.after_move`): criterion (34) on the decrements of the
    height of the centre of mass (period 3 as in the paper, and periods 2 and 4), and a
-   backstop when the centre of mass went down by less than ``CYCLE_CLOSE_GAP`` in the last
+   backstop when the centre of mass went down by less than ``CREEP_DESCENT`` in the last
    24 steps; either declares every obstacle within ``CYCLE_CLOSE_GAP`` a closed contact.
    The same remedy is applied once when the decision finds rest (obstacles left within
    ``CYCLE_CLOSE_GAP`` are then contacts, and the decision is taken again with them).
@@ -65,7 +65,7 @@ from parsim.core.sdbd.contacts import fill_contacts, keep_touching
 from parsim.core.sdbd.cycling import after_move, close_near_obstacles, forget_descents, new_descent_history
 from parsim.core.sdbd.decision import decide
 from parsim.core.sdbd.fall import fall
-from parsim.core.sdbd.grid import grid_insert, wrap_position
+from parsim.core.sdbd.grid import empty_grid, grid_insert, wrap_position
 from parsim.core.sdbd.overlap import max_overlap
 from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.rolling import roll
@@ -84,14 +84,17 @@ D_CLOCKED_SECONDS = 3  # wall-clock seconds from the start of particle clock_fro
 def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                    particle_rotation, particle_drop_xy,
                    geom, igeom, head, col_top, nxt, hkeys, hval, counts,
-                   floor_mode, trial_angle, cycle_n, cycle_eps, max_events, ell, r_max_sed,
+                   floor_mode, trial_angle, cycle_n, cycle_eps, max_events, ell,
                    debug, trace_particle, trace, clock_from,
                    out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state,
-                   out_events, diag):
+                   out_events, out_steps, diag):
     """Deposit all particles; returns ``(stopped_at, n_spheres_written)``.
 
     Inputs are validated by :func:`parsim.core.sdbd.deposit`.  ``geom, igeom, head, ...``
-    is an empty grid from :func:`grid.grid_new`; ``out_*`` are preallocated outputs for
+    is an empty grid from :func:`grid.grid_new` whose cell is at least the first particle's
+    largest sphere diameter; it grows with the largest sphere so far (:func:`_fit_grid`), so
+    that nothing of a particle's descent depends on the particles after it.  ``out_*`` are
+    preallocated outputs for
     all particles (a :class:`.bundles.Record`); ``diag`` (4,) receives diagnostics
     (largest overlap after a move when ``debug``, number of steps, number of chunk steps).
     The steps of particle ``trace_particle`` (``-1``: none) are recorded in the rows of
@@ -110,9 +113,10 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     # section 4.1 for it); VIRTUAL_ANGLE only when the trial test is disabled
     virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
     settings = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
-                        r_max_sed, igeom[0] == LATERAL_WALLS, geom[6], debug)
+                        igeom[0] == LATERAL_WALLS, debug)
     grid = Grid(geom, igeom, head, col_top, nxt, hkeys, hval, counts)
-    record = Record(out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state, out_events)
+    record = Record(out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state, out_events,
+                    out_steps)
     sediment = Sediment(np.empty((max(n_total, 1), 3)), np.empty(max(n_total, 1)))
     particle = Particle(np.empty((n_max, 3)), np.empty(n_max), np.empty((n_max, 3)), np.empty(3),
                         np.empty(4), np.empty((3, 3)))
@@ -131,10 +135,12 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
             clock_start = _wall_clock()
         n = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                           particle_rotation, particle_drop_xy, top_z, ell, particle)
+        _fit_grid(n, particle, sediment, n_sed, grid)
         state, n_c, steps, chunk_ends, overlap, buf = _descend(
             n, particle, work, history, sediment, grid, settings, out_events[p],
             p == trace_particle, trace, buf)
         n_steps += steps
+        out_steps[p] = steps
         n_chunk_ends += chunk_ends
         worst_overlap = max(worst_overlap, overlap)
         if state == EVENT_LIMIT:
@@ -142,12 +148,12 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
             stopped_at = p
             break
         if igeom[0] == LATERAL_PERIODIC:
-            cx, cy = wrap_position(geom, igeom, particle.com[0], particle.com[1])
+            cx, cy = wrap_position(grid.geom, grid.igeom, particle.com[0], particle.com[1])
             particle.com[0] = cx
             particle.com[1] = cy
             place_spheres(n, particle)
         if debug:
-            overlap, buf = max_overlap(n, particle, sediment, grid, r_max_sed, settings.walls, buf)
+            overlap, buf = max_overlap(n, particle, sediment, grid, settings.walls, buf)
             worst_overlap = max(worst_overlap, overlap)
         n_sed, top_z = _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, top_z, record)
     diag[D_MAX_OVERLAP] = worst_overlap
@@ -214,7 +220,7 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
             event_counts[K_SIMULTANEOUS] += n_executed - 1
         n_c = keep_touching(n_c, contacts, n_dr, released, particle, sediment, geom, ell, normal)
         if settings.debug:
-            overlap, buf = max_overlap(n, particle, sediment, grid, settings.r_max_sed, settings.walls, buf)
+            overlap, buf = max_overlap(n, particle, sediment, grid, settings.walls, buf)
             worst_overlap = max(worst_overlap, overlap)
         if traced and n_steps - 1 < trace.shape[0]:
             _record_trace(trace[n_steps - 1], motion, n_c_before, k, m, work.window, phi, n_t,
@@ -226,6 +232,33 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
                                     grid, settings, buf, normal, event_counts)
         if stop:
             return RESTING_ON_FLOOR, n_c, n_steps, n_chunk_ends, worst_overlap, buf
+
+
+@jit
+def _fit_grid(n, particle, sediment, n_sed, grid):
+    """Make the grid's cell at least the largest sphere diameter of the particle of ``n``
+    spheres: when it is larger than any before, the grid is built anew with that cell and the
+    ``n_sed`` sediment spheres are inserted again in their order."""
+    cell = 0.0
+    for i in range(n):
+        cell = max(cell, 2.0 * particle.radius[i])
+    geom = grid.geom
+    if cell <= geom[6]:
+        return
+    sed = sediment.centre
+    geom, igeom, head, col_top, nxt, hkeys, hval, counts = empty_grid(
+        grid.igeom[0], geom[0], geom[1], geom[2], geom[3], cell, grid.nxt.shape[0])
+    for j in range(n_sed):
+        head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j,
+                                                 sed[j, 0], sed[j, 1], sed[j, 2])
+    grid.geom = geom
+    grid.igeom = igeom
+    grid.head = head
+    grid.col_top = col_top
+    grid.nxt = nxt
+    grid.hkeys = hkeys
+    grid.hval = hval
+    grid.counts = counts
 
 
 @jit(inline="always")

@@ -42,7 +42,7 @@ def fall(n, particle, n_c, work, sediment, grid, settings, event_counts):
     n_dr = n_c
     for l in range(n_c):
         copy_contact(contacts, l, work.released, l)
-    n_t, drop, tol = fall_events(n, particle, sediment, grid, settings.r_max_sed, settings.ell, window)
+    n_t, drop, tol = fall_events(n, particle, sediment, grid, settings.ell, window)
     particle.com[2] -= drop
     for i in range(n):
         pos[i, 2] -= drop
@@ -65,7 +65,7 @@ def fall(n, particle, n_c, work, sediment, grid, settings, event_counts):
 
 
 @jit(inline="always")
-def fall_events(n, particle, sediment, grid, r_max_sed, ell, window):
+def fall_events(n, particle, sediment, grid, ell, window):
     """Fill the event window (:mod:`.ties`) with the smallest drop of the falling particle
     and those within ``tolz = SIMULTANEOUS_TOL * ell`` of it; returns ``(n_t, best, tolz)``,
     ``best`` the drop.
@@ -80,6 +80,7 @@ def fall_events(n, particle, sediment, grid, r_max_sed, ell, window):
     sed_r = sediment.radius
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
     cell = geom[6]
+    r_max_sed = 0.5 * cell  # bounds every sediment radius
     tolz = SIMULTANEOUS_TOL * ell
     best = np.inf
     for i in range(n):

@@ -1,6 +1,6 @@
 """Sediment neighbour grid whose cost does not grow with the height of the pile.
 
-Space is cut into columns of side ``ax x ay`` (``>=`` the largest sphere diameter) and
+Space is cut into columns of side ``ax x ay`` (``>=`` the cell, the largest sphere diameter) and
 every column into layers of height ``az`` (the same bound) starting at the floor
 ``z = 0``.  A cell ``(column, layer)`` keeps a singly linked list of the sediment spheres
 whose (wrapped) centre lies in it: ``head[iz, col]`` is the newest sphere, ``nxt[j]`` the
@@ -38,6 +38,7 @@ from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, LATERAL_W
 
 __all__ = [
     "grid_new",
+    "empty_grid",
     "grid_insert",
     "grid_collect",
     "grid_collect_growing",
@@ -55,26 +56,34 @@ def grid_new(lateral, box_lower_xy, box_upper_xy, cell, n_spheres):
     """Empty grid for spheres of diameter ``<= cell``; returns the tuple of state arrays."""
     lo = np.asarray(box_lower_xy, dtype=np.float64)
     hi = np.asarray(box_upper_xy, dtype=np.float64)
+    length = np.zeros(2) if lateral == LATERAL_NONE else hi - lo
+    return empty_grid(int(lateral), float(lo[0]), float(lo[1]), float(length[0]), float(length[1]),
+                      float(cell), int(n_spheres))
+
+
+@jit
+def empty_grid(lateral, lo_x, lo_y, length_x, length_y, cell, n_spheres):
+    """Empty grid for spheres of diameter ``<= cell`` in the box of lower corner ``lo`` and
+    side lengths ``length`` (ignored for LATERAL_NONE); returns the tuple of state arrays."""
     if lateral == LATERAL_NONE:
         ncx = 0
         ncy = 0
-        L = np.array([0.0, 0.0])
-        ax = ay = cell
+        ax = cell
+        ay = cell
         ncol = 64
         hcap = 128
     else:
-        L = hi - lo
-        ncx = max(1, int(math.floor(L[0] / cell)))
-        ncy = max(1, int(math.floor(L[1] / cell)))
-        while ncx > 1 and L[0] / ncx < cell:
+        ncx = max(1, int(math.floor(length_x / cell)))
+        ncy = max(1, int(math.floor(length_y / cell)))
+        while ncx > 1 and length_x / ncx < cell:
             ncx -= 1
-        while ncy > 1 and L[1] / ncy < cell:
+        while ncy > 1 and length_y / ncy < cell:
             ncy -= 1
-        ax = L[0] / ncx
-        ay = L[1] / ncy
+        ax = length_x / ncx
+        ay = length_y / ncy
         ncol = ncx * ncy
         hcap = 2
-    geom = np.array([lo[0], lo[1], L[0], L[1], ax, ay, cell], dtype=np.float64)
+    geom = np.array([lo_x, lo_y, length_x, length_y, ax, ay, cell], dtype=np.float64)
     igeom = np.array([lateral, ncx, ncy], dtype=np.int64)
     head = np.full((8, ncol), -1, dtype=np.int64)
     col_top = np.full(ncol, -1, dtype=np.int64)

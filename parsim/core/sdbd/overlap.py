@@ -13,7 +13,7 @@ __all__ = ["max_overlap"]
 
 
 @jit
-def max_overlap(n, particle, sediment, grid, r_max_sed, lateral_walls, buf):
+def max_overlap(n, particle, sediment, grid, lateral_walls, buf):
     """Largest overlap of the moving spheres with the sediment, the floor and walls;
     returns it and the (possibly grown) query buffer."""
     pos = particle.centre
@@ -23,7 +23,7 @@ def max_overlap(n, particle, sediment, grid, r_max_sed, lateral_walls, buf):
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
     worst = -np.inf
     for i in range(n):
-        reach = rad[i] + r_max_sed
+        reach = rad[i] + 0.5 * geom[6]
         cnt, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval,
                                         pos[i, 0] - reach, pos[i, 0] + reach, pos[i, 1] - reach,
                                         pos[i, 1] + reach, pos[i, 2] - reach, pos[i, 2] + reach, buf)

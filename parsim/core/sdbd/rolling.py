@@ -98,7 +98,7 @@ def roll(n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_c
         axis[q] = scratch.decision[q]
         pivot[q] = scratch.decision[3 + q]
     n_pivots, n_dr = _pivots_and_released(motion, k, m, n_c, work)
-    n_t, best, tol_phi = _end_of_arc(n, particle, axis, pivot, settings, window)
+    n_t, best, tol_phi = _end_of_arc(n, particle, axis, pivot, settings.ell, grid.geom[6], window)
     n_t, best = _loss_events(n_pivots, k, m, work, axis, pivot, settings.ell, n_t, best, tol_phi)
     if n_pivots == 2:
         n_t, best = _release_events(particle.com, k, m, work, axis, pivot, settings, n_t, best, tol_phi)
@@ -134,11 +134,11 @@ def _pivots_and_released(motion, k, m, n_c, work):
 
 
 @jit(inline="always")
-def _end_of_arc(n, particle, axis, pivot, settings, window):
+def _end_of_arc(n, particle, axis, pivot, ell, cell, window):
     """Start the event window with hanging (eqs. 18, 32) or, if that lies beyond it, the end
     of the angular chunk.  Returns ``(n_t, best, tol_phi)``, ``tol_phi`` the angle of
-    ``SIMULTANEOUS_TOL`` of arc length on the sphere farthest from the axis."""
-    ell = settings.ell
+    ``SIMULTANEOUS_TOL`` of arc length on the sphere farthest from the axis; a chunk is
+    ``CHUNK_CELLS`` grid cells of arc on that sphere."""
     pos = particle.centre
     phi_hang, c_hang, s_hang = hang_cos_sin(particle.com, pivot, axis)
     rho_max = 0.0
@@ -154,7 +154,7 @@ def _end_of_arc(n, particle, axis, pivot, settings, window):
     if rho_max < ell:
         rho_max = ell
     tol_phi = SIMULTANEOUS_TOL * ell / rho_max
-    phi_lim = CHUNK_CELLS * settings.cell / rho_max
+    phi_lim = CHUNK_CELLS * cell / rho_max
     if phi_lim > math.pi:
         phi_lim = math.pi
     n_t = 0
@@ -262,7 +262,7 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
     sed_r = sediment.radius
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
     walls = settings.walls
-    reach_sed = settings.r_max_sed
+    reach_sed = 0.5 * geom[6]  # bounds every sediment radius
     pivots = work.pivots
     released = work.released
     scratch = work.scratch
