@@ -20,6 +20,12 @@ looking for overlaps.  Plain numpy.
   paper immobilises it);
 * a particle with fewer than three contacts is reported hanging (or on the floor), and
   one reported resting on three contacts has at least three.
+
+A sphere obstacle's pivot is its centre; the floor's (under FLOOR_ROLL) and a glued wall's
+is the touching sphere's own centre.  A frictionless wall is a sphere of infinite radius:
+its pivot lies at infinity behind the wall, so it adds no rotation of its own (rolling on it
+alone is the fall), and with another pivot ``P`` it makes the rotation about the axis through
+``P`` along the wall's normal.
 """
 
 import numpy as np
@@ -85,6 +91,10 @@ def close_pairs(pos, rad, lateral, box_lower, box_upper, extra):
     return pairs, np.concatenate(out_d)
 
 
+#: Inward normals of the walls, in the order of the columns 1-4 of :func:`_plane_gaps`.
+WALL_NORMALS = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+
+
 def _plane_gaps(x, r, lateral, box_lower, box_upper):
     """Gaps to the floor (column 0) and, for walls, to the four walls (n, 1 or 5)."""
     g = [x[:, 2] - r]
@@ -95,9 +105,12 @@ def _plane_gaps(x, r, lateral, box_lower, box_upper):
 
 
 def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_xy,
-                   box_upper_xy, lateral, floor, overlap_tol=1e-9, contact_tol=1e-7,
+                   box_upper_xy, lateral, floor, walls="frictionless", overlap_tol=1e-9, contact_tol=1e-7,
                    deltas=(1e-7, 1e-6, 1e-5, 1e-4), block_tol=1e-12, max_report=20):
-    """Problems found in a sediment (see the module docs); an empty list means valid."""
+    """Problems found in a sediment (see the module docs); an empty list means valid.
+    ``walls`` is the wall contact model, "frictionless" or "glued"."""
+    if walls not in ("frictionless", "glued"):
+        raise ValueError(f"walls must be 'frictionless' or 'glued', got {walls!r}")
     pos = np.asarray(positions, float)
     rad = np.asarray(radii, float)
     part = np.asarray(particle, np.int64)
@@ -157,9 +170,13 @@ def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_
             pivots.append(s_pos[j])
         pi, pk = np.nonzero(pg0 < contact_tol * ell)
         on_floor = bool(np.any(pk == 0))
+        sliding = []  # normals of frictionless wall contacts (pivots at infinity)
         for i, k in zip(pi, pk):
-            pivots.append(a[i].copy())
-        n_contacts = len(pivots)
+            if k > 0 and walls == "frictionless":
+                sliding.append(WALL_NORMALS[k - 1])
+            else:
+                pivots.append(a[i].copy())
+        n_contacts = len(pivots) + len(sliding)
         if floor == FLOOR_STOP and on_floor:
             continue
 
@@ -177,8 +194,11 @@ def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_
             if dh <= 1e-9 * np.linalg.norm(dv):
                 continue
             motions.append((f"roll on contact {k}", P, np.array([-dv[1], dv[0], 0.0]) / dh))
-        for k in range(n_contacts):
-            for m in range(k + 1, n_contacts):
+        for k in range(len(pivots)):
+            for normal in sliding:
+                for sg in (1.0, -1.0):
+                    motions.append((f"roll on contact {k} along a wall", pivots[k], sg * normal))
+            for m in range(k + 1, len(pivots)):
                 u = pivots[m] - pivots[k]
                 if np.linalg.norm(u) < 1e-9 * ell:
                     continue

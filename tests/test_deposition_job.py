@@ -128,3 +128,18 @@ def test_invalid_deposition_jobs(change, message):
         text = text.replace('shape = ["sphere", "spiky", "cube"]', "")
     with pytest.raises(JobError, match=message):
         parse_job(text, SOLVERS)
+
+
+@pytest.mark.parametrize("lateral", ["periodic", "walls", "none"])
+def test_the_first_particles_of_a_task_are_the_task_with_fewer_of_them(lateral):
+    solver = SOLVERS["deposition"]
+    params = {p.name: p.default for p in solver.parameters}
+    params.update(shape="rod", shape_size=5, box_length=12.0, lateral=lateral, floor="roll",
+                  size_distribution="lognormal", size_spread=0.2, packing_samples=5000)
+    results = {}
+    for n in (90, 35):
+        params["n_particles"] = n
+        results[n] = solver.solve(dict(params), np.random.default_rng(5), None).configuration.arrays
+    many, few = results[90], results[35]
+    for key, value in few.items():
+        np.testing.assert_array_equal(many[key][:len(value)], value, err_msg=key)  # bitwise

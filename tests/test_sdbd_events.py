@@ -356,15 +356,29 @@ def release_function(com, px, py, ay, ny_fixed, axis, phis):
     return np.sum(t * N, axis=-1)
 
 
-def release_angle(com, px, py, ay, is_sphere, ny, axis):
+def release_angle(com, px, py, ay, is_sphere, ny, axis, sliding_wall=False):
+    """The release angle from the plane of eq. 30 (of a frictionless wall if ``sliding_wall``)."""
     nrm = np.empty(3)
-    ok, use_com, c0, gap = ev.release_plane(com, px, py, ay, is_sphere,
-                                            ny if ny is not None else np.zeros(3), nrm)
+    if sliding_wall:
+        ok, use_com, c0, gap = ev.sliding_wall_release_plane(com, px, ay, ny, nrm)
+    else:
+        ok, use_com, c0, gap = ev.release_plane(com, px, py, ay, is_sphere,
+                                                ny if ny is not None else np.zeros(3), nrm)
     if not ok:
         return np.inf
     point = com if use_com else ay
     phi, c, s = ev.plane_contact_angle(point, px, axis, nrm, c0, 1.0, ev.POLICY_TRUSTED)
     return phi if phi <= np.pi else np.inf
+
+
+def agrees(phi, brute):
+    """Assert that the release angle equals the brute-force one (or both are absent); 1 if there
+    was one."""
+    if np.isfinite(brute):
+        assert abs(phi - brute) < 1e-7, (phi, brute)
+        return 1
+    assert not np.isfinite(phi)
+    return 0
 
 
 def test_loss_of_one_contact_eq25_30_random():
@@ -377,12 +391,7 @@ def test_loss_of_one_contact_eq25_30_random():
             if f0 >= -1e-6:
                 continue  # rolling on x is not blocked by y now
             brute = first_true(lambda p: release_function(com, px, py, ay, None, axis, p) > 0)
-            phi = release_angle(com, px, py, ay, True, None, axis)
-            if np.isfinite(brute):
-                found += 1
-                assert abs(phi - brute) < 1e-7, (phi, brute)
-            else:
-                assert not np.isfinite(phi)
+            found += agrees(release_angle(com, px, py, ay, True, None, axis), brute)
     assert found > 15
 
 
@@ -403,13 +412,31 @@ def test_loss_of_one_contact_with_a_wall_random():
         if f0 >= -1e-6:
             continue
         brute = first_true(lambda p: release_function(com, s1, py, a2, N, axis, p) > 0)
-        phi = release_angle(com, s1, py, a2, False, N, axis)
-        if np.isfinite(brute):
-            found += 1
-            assert abs(phi - brute) < 1e-7, (phi, brute)
-        else:
-            assert not np.isfinite(phi)
+        found += agrees(release_angle(com, s1, py, a2, False, N, axis), brute)
     assert found > 8
+
+
+def test_release_from_a_frictionless_wall_random():
+    """Eq. 25 when the released contact is a frictionless wall: the pair rotation is about the
+    axis through the sphere pivot along the wall's normal, and rolling on the sphere pivot alone
+    becomes possible where it first moves the wall's sphere away from the wall."""
+    rng = np.random.default_rng(12)
+    found = 0
+    for _ in range(80):
+        N = np.array([*unit(rng.normal(size=2)), 0.0])  # a vertical wall, normal into the box
+        px = rng.normal(size=3)
+        ay = px + rng.uniform(1.0, 2.0) * random_unit(rng)  # the sphere touching the wall
+        com = 0.5 * (px + ay) + rng.normal(scale=0.7, size=3)
+        w = np.cross(N, com - px)
+        if abs(w[2]) < 1e-3:
+            continue
+        axis = -np.sign(w[2]) * N  # the sense that lowers the centre of mass
+        f0 = release_function(com, px, None, ay, N, axis, np.array([0.0]))[0]
+        if f0 >= -1e-6:
+            continue
+        brute = first_true(lambda p: release_function(com, px, None, ay, N, axis, p) > 0)
+        found += agrees(release_angle(com, px, None, ay, False, N, axis, sliding_wall=True), brute)
+    assert found > 15
 
 
 def test_loss_of_two_contacts_random():

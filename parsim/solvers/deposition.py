@@ -19,7 +19,7 @@ import numpy as np
 from parsim.agglomerate_file import read_agglomerate
 from parsim.core import sdbd
 from parsim.core import shapes as shape_library
-from parsim.core.sediment import coordination, filling_height, packing_fractions
+from parsim.core.sediment import MAX_POINTS_PER_CAP, coordination, filling_height, packing_fractions
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import REQUIRED, Parameter
 from parsim.solver import LENGTH_UNITS, Configuration, Coordinate, Solver, Statistic, TaskResult
@@ -27,6 +27,7 @@ from parsim.solver import LENGTH_UNITS, Configuration, Coordinate, Solver, Stati
 SHAPES = ("sphere", "rod", "four_rods", "tripod", "spiky", "cube", "ellipsoid", "superellipsoid", "agglomerate")
 LATERAL = {"periodic": sdbd.LATERAL_PERIODIC, "walls": sdbd.LATERAL_WALLS, "none": sdbd.LATERAL_NONE}
 FLOOR = {"stop": sdbd.FLOOR_STOP, "roll": sdbd.FLOOR_ROLL}
+WALLS = {"frictionless": sdbd.WALLS_FRICTIONLESS, "glued": sdbd.WALLS_GLUED}
 SIZE_DISTRIBUTIONS = ("monodisperse", "uniform", "lognormal")
 SMOOTH_SHAPES = ("ellipsoid", "superellipsoid")
 SIZE_KEYS = {"rod": "shape_size", "four_rods": "shape_size", "tripod": "shape_size", "spiky": "shape_size",
@@ -35,7 +36,7 @@ SIZE_KEYS = {"rod": "shape_size", "four_rods": "shape_size", "tripod": "shape_si
 BYTES_PER_PARTICLE = 512  # the terms of one task's memory estimate, see memory()
 BYTES_PER_SEDIMENT_SPHERE = 128
 BYTES_PER_SMOOTH_SHAPE_SPHERE = 3072
-BYTES_PER_PACKING_SAMPLE = 64
+BYTES_PER_CAP_POINT = 48
 BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the filling height, away from floor and surface
 WARM_UP_PARTICLES = 4  # particles of the warm-up run, which compiles the kernels before any task
 WARM_UP_PACKING_SAMPLES = 1000  # the fewest allowed
@@ -73,9 +74,12 @@ PARAMETERS = (
               low=0.0, low_inclusive=False),
     Parameter("box_length", float, 50.0, LENGTH_UNITS, "side of the square bottom [0, box_length]^2 "
               "(periodic or walled)", low=0.0, low_inclusive=False),
-    Parameter("lateral", str, "periodic", "1", "lateral boundaries: periodic, walls (rigid; a sphere touching "
-              "a wall pivots about its centre, no sliding), none (a heap on an unbounded floor)",
-              choices=tuple(LATERAL)),
+    Parameter("lateral", str, "periodic", "1", "lateral boundaries: periodic, walls (four rigid vertical walls, "
+              "see walls), none (a heap on an unbounded floor)", choices=tuple(LATERAL)),
+    Parameter("walls", str, "frictionless", "1", "wall contact with lateral = walls: frictionless (a sphere of "
+              "infinite radius: the wall pushes only along its normal and a touching sphere slides along it) or "
+              "glued (the wall holds the touching sphere's centre: it pivots about it, no sliding)",
+              choices=tuple(WALLS), affects_seed=False),
     Parameter("floor", str, "stop", "1", "floor z = 0: stop (the paper: a particle touching it is immobilised) "
               "or roll (the floor contact acts as a pivot and the particle keeps rolling)", choices=tuple(FLOOR)),
     Parameter("drop_radius", float, 5.0, LENGTH_UNITS, "with lateral = none: particles are released uniformly "
@@ -161,15 +165,19 @@ def memory(params: dict) -> int:
       contact statistics;
     - ``BYTES_PER_SMOOTH_SHAPE_SPHERE`` per sphere of a (super)ellipsoid, once: building it scans
       16 surface samples per sphere (points, normals, chords, cells, a heap);
-    - ``BYTES_PER_PACKING_SAMPLE`` per quasi-Monte Carlo point of one slab of the packing fraction.
+    - ``BYTES_PER_CAP_POINT`` per quasi-Monte Carlo point of the overlap caps of the packing
+      fraction: one cap's points are held at a time, at most ``MAX_POINTS_PER_CAP`` of them
+      (about 3 MiB).
 
     Measured peaks: 0.37 KiB per particle of one sphere, 95 B per sediment sphere of cubes
-    (L = 3), 2.4 KiB per sphere of an ellipsoid of 8000 spheres.
+    (L = 3), 2.4 KiB per sphere of an ellipsoid of 8000 spheres, 48 B per cap point (rods of
+    five overlapping spheres, tracemalloc).
     """
     spheres = _spheres_per_particle(params)
     build = BYTES_PER_SMOOTH_SHAPE_SPHERE * spheres if params["shape"] in SMOOTH_SHAPES else 0
     sediment = params["n_particles"] * (BYTES_PER_PARTICLE + BYTES_PER_SEDIMENT_SPHERE * spheres)
-    return build + sediment + BYTES_PER_PACKING_SAMPLE * params["packing_samples"]
+    cap_points = min(MAX_POINTS_PER_CAP, params["packing_samples"] * (params["profile_bins"] + 1))
+    return build + sediment + BYTES_PER_CAP_POINT * cap_points
 
 
 def memory_keys(params: dict) -> tuple[str, ...]:
@@ -198,14 +206,17 @@ def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
     """One task; serial, so ``comm`` (a group of one, see :class:`parsim.solver.Solver`) is not used."""
     offsets, radii, volume = particle_shape(params)
     n = params["n_particles"]
-    scale = _size_factors(params, rng)
-    rotation = shape_library.random_rotations(n, rng)
-    drop_xy = _drop_positions(params, offsets, radii, scale, rng)
+    # sizes, orientations and drop points each from their own stream: the first k particles of a
+    # task are those of the same task with n_particles = k, and so is their sediment
+    size_rng, rotation_rng, drop_rng = rng.spawn(3)
+    scale = _size_factors(params, size_rng)
+    rotation = shape_library.random_rotations(n, rotation_rng)
+    drop_xy = _drop_positions(params, offsets, radii, scale, drop_rng)
     lower, upper = np.zeros(2), np.full(2, params["box_length"])  # unused with lateral = none
     skip = int(params["timing_skip_fraction"] * n)
     result = sdbd.deposit(offsets, radii, np.array([0, len(radii)]), np.zeros(n, dtype=np.int64), scale, rotation,
                           drop_xy, lower, upper, LATERAL[params["lateral"]], FLOOR[params["floor"]],
-                          trial_angle=params["trial_angle"], cycle_n=params["cycle_n"],
+                          walls=WALLS[params["walls"]], trial_angle=params["trial_angle"], cycle_n=params["cycle_n"],
                           cycle_eps=params["cycle_eps"],
                           max_events_per_particle=params["max_events_per_particle"],
                           clock_from_particle=skip if skip < n else -1)
@@ -332,8 +343,9 @@ def _drop_positions(params, offsets, radii, scale, rng):
     """Horizontal release positions of the centres of mass."""
     n, length = params["n_particles"], params["box_length"]
     if params["lateral"] == "none":
-        radius = params["drop_radius"] * np.sqrt(rng.random(n))  # uniform over the disc
-        angle = 2.0 * np.pi * rng.random(n)
+        u = rng.random((n, 2))  # one row per particle
+        radius = params["drop_radius"] * np.sqrt(u[:, 0])  # uniform over the disc
+        angle = 2.0 * np.pi * u[:, 1]
         return np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
     if params["lateral"] == "walls":  # the whole particle starts inside, whatever its orientation
         margin = shape_library.bounding_radius(offsets, radii) * scale[:, None]

@@ -104,9 +104,10 @@ Grid = bundle("Grid", ["geom", "igeom", "head", "col_top", "nxt", "hkeys", "hval
 #: The parameters of a run: floor mode (``FLOOR_*``), trial angle of 4.1 (0: off), the
 #: virtual small rotation of eq. 31, criterion (34)'s ``cycle_n`` and ``cycle_eps``, the
 #: largest number of steps of a particle, the length scale ``ell`` of the tolerances,
-#: whether the box has walls, whether every move is checked for overlaps.
+#: whether the box has walls and whether they are frictionless (``WALLS_FRICTIONLESS``),
+#: whether every move is checked for overlaps.
 Settings = namedtuple("Settings", ["floor_mode", "trial_angle", "virtual_angle", "cycle_n", "cycle_eps",
-                                   "max_events", "ell", "walls", "debug"])
+                                   "max_events", "ell", "walls", "sliding_walls", "debug"])
 
 #: Three-vectors and small arrays reused by every step: the rotation ``axis`` and a point
 #: ``pivot`` of it, the arc frame ``e1, e2``, plane normals ``normal, normal_2``, a rotated

@@ -15,6 +15,15 @@ LATERAL_WALLS = 1
 #: No lateral boundary: a heap on an unbounded floor.
 LATERAL_NONE = 2
 
+#: A wall contact is a sphere of infinite radius (the default): the wall pushes only along its
+#: normal, its pivot lies at infinity behind it, so the wall never holds a particle up by
+#: itself, and with one other pivot ``P`` the particle rotates about the axis through ``P``
+#: along the wall's normal, the touching sphere sliding along the wall.
+WALLS_FRICTIONLESS = 0
+#: A wall contact holds the touching sphere's centre fixed (a pivot about that centre, no
+#: sliding), like the floor under FLOOR_ROLL.
+WALLS_GLUED = 1
+
 #: The paper's floor: a particle touching the plane ``z = 0`` is immobilised at once.
 FLOOR_STOP = 0
 #: The floor contact is a pivot like any other (about the touching sphere's own centre).
@@ -28,13 +37,13 @@ RESTING_THREE_CONTACTS = 0
 #: Stopped on the floor: FLOOR_STOP immobilised it at its first floor contact, or, under
 #: FLOOR_ROLL, it rests with fewer than three contacts one of which is the floor.
 RESTING_ON_FLOOR = 1
-#: Hangs on one contact: the centre of mass is straight below the pivot.  (Also a
-#: particle held at rest by one wall contact and nothing else that lets it descend.)
+#: Hangs on one contact: the centre of mass is straight below the pivot.  (With glued walls,
+#: also a particle held at rest by one wall contact and nothing else that lets it descend.)
 HANGING_ONE = 2
 #: Hangs on two contacts: the centre of mass is straight below the axis of the pivots.
-#: With walls this also covers a particle held by a wall and one other contact: the wall
-#: pivot is the touching sphere's own centre (no sliding), so e.g. a single sphere
-#: touching a wall and a sediment sphere has its centre on the axis and cannot roll.
+#: With glued walls this also covers a particle held by a wall and one other contact: the
+#: wall pivot is the touching sphere's own centre, so e.g. a single sphere touching a wall
+#: and a sediment sphere has its centre on the axis and cannot roll.
 HANGING_TWO = 3
 #: The particle needed more than ``max_events_per_particle`` events; the run stopped there.
 EVENT_LIMIT = 4

@@ -5,7 +5,8 @@ functions below name its fields as the paper's symbols:
 
 ``ca``   (``centre``) centre of the moving sphere of the contact
 ``cP``   (``pivot``) the sediment sphere's centre (minimum image), or for the floor and a
-         wall the moving sphere's own centre (the plane holds it; see the engine docs)
+         glued wall the moving sphere's own centre (the plane holds it; see the engine docs);
+         a frictionless wall's pivot lies at infinity behind it and ``cP`` is not used
 ``cN``   (``normal``) unit contact normal pointing from the obstacle to the moving sphere
 ``ckind`` (``kind``) obstacle kind (``OB_SPHERE``, ``OB_FLOOR``, ``OB_WALL_*``)
 ``cD``   (``reach``) sum of radii (sphere contacts)
@@ -19,6 +20,12 @@ The candidate motions are those of the paper (Fig. 2, 3.2, 3.3):
   slope ``-dz_cm/ds = |d_xy| / |d|`` with ``d = r_cm - P_k``;
 * rotation on two contacts ``k, m`` (3.3): axis along ``P_m - P_k`` (eq. 24), the sense
   that lowers the centre of mass, slope ``|(u x d)_z| / |u x d|``.
+
+A frictionless wall (``sliding_walls``) is a sphere of infinite radius whose centre lies at
+infinity behind the wall: the axis through a pivot ``P`` and that point is the line through
+``P`` along the wall's normal (the touching sphere slides along the wall), a rotation on the
+wall alone is a translation along the wall, i.e. the fall, and two walls make no axis (their
+"rotation" is the vertical translation, the fall again).
 
 A candidate is *valid* when every other contact opens or stays closed under it: the rate
 ``N_l . (omega x (a_l - P))`` of its gap is positive, or, when it is tangent within
@@ -54,6 +61,7 @@ from parsim.core.sdbd.constants import (
     MOTION_SINGLE,
     NZ_TOL,
     OB_SPHERE,
+    OB_WALL_XLO,
     PROBE_ANGLE,
     PROBE_TOL,
     RATE_TOL,
@@ -128,26 +136,44 @@ def _offset_from_pivot(com, cP, k):
 
 
 @jit
-def _pair_axis(cP, k, m, ell):
-    """``(True, u)``, u the unit vector from pivot ``k`` to pivot ``m``; ``(False, 0)`` when
-    the two pivots are one point (no axis through them)."""
+def _slides(ckind, l, sliding_walls):
+    """Is contact ``l`` a frictionless wall (a pivot at infinity)?"""
+    return sliding_walls and ckind[l] >= OB_WALL_XLO
+
+
+@jit
+def _pair_axis(cP, cN, ckind, k, m, sliding_walls, ell):
+    """The axis through the pivots of contacts ``k`` and ``m``: ``(True, u, b)``, ``u`` its
+    unit vector (from pivot ``k`` to pivot ``m``, or along a frictionless wall's normal) and
+    ``b`` the contact whose pivot lies on it; ``(False, 0, -1)`` when there is no axis (the
+    two pivots are one point, or both at infinity)."""
+    slides_k = _slides(ckind, k, sliding_walls)
+    slides_m = _slides(ckind, m, sliding_walls)
+    if slides_k and slides_m:
+        return False, 0.0, 0.0, 0.0, -1
+    if slides_k:
+        return True, cN[k, 0], cN[k, 1], cN[k, 2], m
+    if slides_m:
+        return True, cN[m, 0], cN[m, 1], cN[m, 2], k
     u0 = cP[m, 0] - cP[k, 0]
     u1 = cP[m, 1] - cP[k, 1]
     u2 = cP[m, 2] - cP[k, 2]
     L = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
     if L <= _SAME_PIVOT * ell:
-        return False, 0.0, 0.0, 0.0
-    return True, u0 / L, u1 / L, u2 / L
+        return False, 0.0, 0.0, 0.0, -1
+    return True, u0 / L, u1 / L, u2 / L, k
 
 
 @jit
-def decide(com, n_c, geometry, ell, out):
+def decide(com, n_c, geometry, ell, sliding_walls, out):
     """Choose the motion of a particle with centre of mass ``com`` and ``n_c`` contacts of
-    the given geometry; returns ``(motion, k, m, slope)``.
+    the given geometry, wall contacts frictionless if ``sliding_walls``; returns ``(motion,
+    k, m, slope)``.
 
     For a rotation, ``out[0:3]`` is the unit axis (rotation sense: positive angle) and
-    ``out[3:6]`` a point of it (the pivot ``P_k``); ``k`` (and ``m`` for a pair) are the
-    pivot contacts, ``-1`` otherwise.
+    ``out[3:6]`` a point of it (the pivot ``P_k``, or for a pair with a frictionless wall the
+    other contact's pivot); ``k`` (and ``m`` for a pair) are the pivot contacts, ``-1``
+    otherwise.
     """
     ca, cP, cN, cD, cc0, ckind = geometry_arrays(geometry)
     if n_c == 0:
@@ -163,8 +189,11 @@ def decide(com, n_c, geometry, ell, out):
     motion = MOTION_REST
     bk = -1
     bm = -1
-    # rotation on one contact
+    base = -1  # the contact whose pivot lies on the chosen axis
+    # rotation on one contact (on a frictionless wall alone: the fall, tested above)
     for k in range(n_c):
+        if _slides(ckind, k, sliding_walls):
+            continue
         d0, d1, d2, dn, dh = _offset_from_pivot(com, cP, k)
         if dn <= TINY * ell or not _descends(dh, dn, ell):
             continue
@@ -179,18 +208,19 @@ def decide(com, n_c, geometry, ell, out):
             motion = MOTION_SINGLE
             bk = k
             bm = -1
+            base = k
             out[0] = w0
             out[1] = w1
             out[2] = 0.0
     # rotation on two contacts
     for k in range(n_c):
         for m in range(k + 1, n_c):
-            ok, u0, u1, u2 = _pair_axis(cP, k, m, ell)
+            ok, u0, u1, u2, b = _pair_axis(cP, cN, ckind, k, m, sliding_walls, ell)
             if not ok:
                 continue
-            d0 = com[0] - cP[k, 0]
-            d1 = com[1] - cP[k, 1]
-            d2 = com[2] - cP[k, 2]
+            d0 = com[0] - cP[b, 0]
+            d1 = com[1] - cP[b, 1]
+            d2 = com[2] - cP[b, 2]
             x0 = u1 * d2 - u2 * d1
             x1 = u2 * d0 - u0 * d2
             x2 = u0 * d1 - u1 * d0
@@ -201,18 +231,21 @@ def decide(com, n_c, geometry, ell, out):
             if slope <= best + STEEP_TOL:
                 continue
             sg = -1.0 if x2 > 0.0 else 1.0
-            if _all_open(n_c, k, m, cP[k, 0], cP[k, 1], cP[k, 2], sg * u0, sg * u1, sg * u2,
+            if _all_open(n_c, k, m, cP[b, 0], cP[b, 1], cP[b, 2], sg * u0, sg * u1, sg * u2,
                          ca, cP, cN, ckind, cD, cc0, ell):
                 best = slope
                 motion = MOTION_PAIR
                 bk = k
                 bm = m
+                base = b
                 out[0] = sg * u0
                 out[1] = sg * u1
                 out[2] = sg * u2
     if motion == MOTION_REST:
         # unstable equilibria: centre of mass straight above a pivot
         for k in range(n_c):
+            if _slides(ckind, k, sliding_walls):
+                continue
             d0, d1, d2, dn, dh = _offset_from_pivot(com, cP, k)
             if dn <= TINY * ell or _descends(dh, dn, ell) or d2 <= 0.0:
                 continue
@@ -238,14 +271,14 @@ def decide(com, n_c, geometry, ell, out):
         # ... or straight above the axis of two pivots (top of its circle)
         for k in range(n_c):
             for m in range(k + 1, n_c):
-                ok, u0, u1, u2 = _pair_axis(cP, k, m, ell)
+                ok, u0, u1, u2, b = _pair_axis(cP, cN, ckind, k, m, sliding_walls, ell)
                 if not ok:
                     continue
                 if 1.0 - abs(u2) <= DESCENT_TOL:
                     continue  # vertical axis: no height change
-                d0 = com[0] - cP[k, 0]
-                d1 = com[1] - cP[k, 1]
-                d2 = com[2] - cP[k, 2]
+                d0 = com[0] - cP[b, 0]
+                d1 = com[1] - cP[b, 1]
+                d2 = com[2] - cP[b, 2]
                 h = d0 * u0 + d1 * u1 + d2 * u2
                 p0 = d0 - h * u0
                 p1 = d1 - h * u1
@@ -260,15 +293,15 @@ def decide(com, n_c, geometry, ell, out):
                     continue
                 for t in range(2):
                     sg = 1.0 if t == 0 else -1.0
-                    if _all_open(n_c, k, m, cP[k, 0], cP[k, 1], cP[k, 2], sg * u0, sg * u1,
+                    if _all_open(n_c, k, m, cP[b, 0], cP[b, 1], cP[b, 2], sg * u0, sg * u1,
                                  sg * u2, ca, cP, cN, ckind, cD, cc0, ell):
                         out[0] = sg * u0
                         out[1] = sg * u1
                         out[2] = sg * u2
                         for q in range(3):
-                            out[3 + q] = cP[k, q]
+                            out[3 + q] = cP[b, q]
                         return MOTION_PAIR, k, m, 0.0
         return MOTION_REST, -1, -1, 0.0
     for q in range(3):
-        out[3 + q] = cP[bk, q]
+        out[3 + q] = cP[base, q]
     return motion, bk, bm, best

@@ -75,6 +75,7 @@ __all__ = [
     "hanging_com_two",
     "loss_position_eq17",
     "release_plane",
+    "sliding_wall_release_plane",
     "same_side_eq16",
 ]
 
@@ -470,6 +471,40 @@ def release_plane(com, px, py, ay, y_is_sphere, normal_y, out_normal):
         c0 = level
     gap = out_normal[0] * com[0] + out_normal[1] * com[1] + out_normal[2] * com[2] - c0
     return True, True, c0, gap
+
+
+@jit
+def sliding_wall_release_plane(com, px, ay, normal_y, out_normal):
+    """Eqs. 25-30 for a frictionless wall ``y``: the plane whose crossing releases rolling on
+    pivot ``x`` from the wall.
+
+    The particle rotates about the axis through ``px`` along the wall's normal ``N``.  Rolling
+    on ``x`` alone (axis ``e_z x d / |...|``, ``d = r_cm - px``) moves the wall's sphere
+    ``a_y`` at the rate ``N . ((e_z x d) x e) = (N . d) (z_ay - z_px)`` away from the wall
+    (``e = a_y - px``, ``N_z = 0``).  ``N . d`` is constant during the rotation (the axis is
+    along ``N``), so the release is the crossing of the height of the pivot by ``a_y``: the
+    plane ``z = z_px``, on the side of the sign of ``N . d``.
+
+    Same return and plane convention as :func:`release_plane`; the point is ``a_y``
+    (``use_com`` False).  ``N . d = 0`` (the centre of mass in the wall-parallel plane through
+    the pivot) never releases.
+    """
+    nd = (normal_y[0] * (com[0] - px[0]) + normal_y[1] * (com[1] - px[1])
+          + normal_y[2] * (com[2] - px[2]))
+    scale = math.sqrt((com[0] - px[0]) ** 2 + (com[1] - px[1]) ** 2 + (com[2] - px[2]) ** 2)
+    if abs(nd) <= 1e-14 * scale or scale == 0.0:
+        return False, False, 0.0, 0.0
+    out_normal[0] = 0.0
+    out_normal[1] = 0.0
+    if nd > 0.0:
+        # release when z_ay > z_px: stay blocked while -z_ay >= -z_px
+        out_normal[2] = -1.0
+        c0 = -px[2]
+    else:
+        out_normal[2] = 1.0
+        c0 = px[2]
+    gap = out_normal[2] * ay[2] - c0
+    return True, False, c0, gap
 
 
 @jit

@@ -20,7 +20,7 @@ __all__ = ["decision_changes"]
 
 
 @jit(inline="always")
-def decision_changes(motion, n_pivots, k, m, geometry, com, axis, pivot, trial_angle, work, ell):
+def decision_changes(motion, n_pivots, k, m, geometry, com, axis, pivot, trial_angle, work, settings):
     """Does the decision change after the rotation by ``trial_angle`` about ``axis`` through
     ``pivot``, the ``n_pivots`` pivots (contacts ``k`` and ``m`` of ``geometry``) being the
     only contacts?  The same motion on the same pivots is no change."""
@@ -51,6 +51,6 @@ def decision_changes(motion, n_pivots, k, m, geometry, com, axis, pivot, trial_a
             for q in range(3):
                 tP[t, q] = point[q]
                 tN[t, q] = cN[l, q]
-    motion_after, k_after, m_after, _ = decide(scratch.trial_com, n_pivots, work.trial, ell,
-                                               scratch.trial_decision)
+    motion_after, k_after, m_after, _ = decide(scratch.trial_com, n_pivots, work.trial, settings.ell,
+                                               settings.sliding_walls, scratch.trial_decision)
     return not (motion_after == motion and k_after == 0 and (n_pivots == 1 or m_after == 1))

@@ -69,6 +69,7 @@ from parsim.core.sdbd.events import (
     hang_cos_sin,
     plane_coefficients,
     release_plane,
+    sliding_wall_release_plane,
 )
 from parsim.core.sdbd.frustration import decision_changes
 from parsim.core.sdbd.grid import grid_collect, min_image
@@ -105,7 +106,7 @@ def roll(n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_c
     trial_angle = settings.trial_angle
     if trial_angle > 0.0 and trial_angle <= best + tol_phi:
         if decision_changes(motion, n_pivots, k, m, work.geometry, particle.com, axis, pivot,
-                            trial_angle, work, settings.ell):
+                            trial_angle, work, settings):
             n_t, best = push_event(n_t, best, tol_phi, trial_angle, math.cos(trial_angle),
                                    math.sin(trial_angle), EV_TRIAL, -1, -1, -1, 0.0, 0.0, window)
     n_t, best, buf = _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment,
@@ -210,7 +211,8 @@ def _loss_events(n_pivots, k, m, work, axis, pivot, ell, n_t, best, tol_phi):
 @jit(inline="always")
 def _release_events(com, k, m, work, axis, pivot, settings, n_t, best, tol_phi):
     """On two pivots: rolling on one of them alone becomes possible (eqs. 25-30, the plane
-    of :func:`.events.release_plane`).  When the release condition already holds with zero
+    of :func:`.events.release_plane`, or of :func:`.events.sliding_wall_release_plane` when
+    the other pivot is a frictionless wall).  When the release condition already holds with zero
     rate, the virtual small rotation of eq. 31 is the event."""
     ell = settings.ell
     window = work.window
@@ -223,7 +225,12 @@ def _release_events(com, k, m, work, axis, pivot, settings, n_t, best, tol_phi):
     for t in range(2):
         x = k if t == 0 else m
         y = m if t == 0 else k
-        ok, use_com, c0, gap0 = release_plane(com, cP[x], cP[y], ca[y], ckind[y] == OB_SPHERE, cN[y], nrm2)
+        if settings.sliding_walls and ckind[x] >= OB_WALL_XLO:
+            continue  # rolling on a frictionless wall alone is the fall: the loss of y (eq. 17)
+        if settings.sliding_walls and ckind[y] >= OB_WALL_XLO:
+            ok, use_com, c0, gap0 = sliding_wall_release_plane(com, cP[x], ca[y], cN[y], nrm2)
+        else:
+            ok, use_com, c0, gap0 = release_plane(com, cP[x], cP[y], ca[y], ckind[y] == OB_SPHERE, cN[y], nrm2)
         if not ok:
             continue
         if use_com:
