@@ -8,6 +8,9 @@
     parsim plot OUTPUT [--figure NAME] [--out PATH] [--task LABEL]
                                               the papers' figures from a job's outputs, PNG and PDF
                                               (default: every figure the dataset supports, in OUTPUT/figures)
+    parsim --version                          the installed version
+
+``python -m parsim`` is the same command.
 
 Errors a user can cause are printed as one line, without a traceback: exit
 status 2 for a job that cannot run as written (checked before anything is
@@ -21,6 +24,7 @@ import signal
 import sys
 from pathlib import Path
 
+import parsim
 from parsim.errors import JobError, ParsimError, describe_exception
 
 EXIT_USER_ERROR = 2
@@ -29,6 +33,7 @@ EXIT_RUN_FAILED = 1
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="parsim", description="Particle piles and clusters, run as MPI ensembles.")
+    parser.add_argument("--version", action="version", version=f"parsim {parsim.__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     run = commands.add_parser("run", help="run or resume a job (use mpiexec -n K for K ranks)")
@@ -78,10 +83,16 @@ def _run(args) -> int:
 
     from parsim.job import load_job
     from parsim.parallel.collective import FailedOnRoot, abort_job, on_root, raised_on_every_rank
+    from parsim.parallel.launcher import launcher_mismatch, speaks_for_all
     from parsim.runner import run_job
     from parsim.solvers import SOLVERS
 
     comm = MPI.COMM_WORLD
+    mismatch = launcher_mismatch(comm.Get_size())
+    if mismatch:  # every process would run the whole job into the same folder
+        if speaks_for_all():
+            print(f"parsim: error: {mismatch}", file=sys.stderr)
+        return EXIT_USER_ERROR
     try:
         job = on_root(comm, lambda: load_job(args.job, SOLVERS, output=args.output))
         path = run_job(job, comm, progress=not args.quiet, ranks_per_task=args.ranks_per_task)

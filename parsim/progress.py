@@ -1,36 +1,86 @@
-"""Rank 0's progress bar over the tasks of a job: done, elapsed, remaining.
+"""Rank 0's progress over the tasks of a job: done, elapsed, remaining.
 
-Tasks run costliest first and their costs differ a hundredfold, so a bar that
+Tasks run costliest first and their costs differ a hundredfold, so progress that
 counted tasks would predict the end from the slowest ones and overestimate the
-time left many times over.  The bar advances by each task's estimated cost
+time left many times over.  Progress advances by each task's estimated cost
 (:attr:`parsim.solver.Solver.cost`) instead, and the time left is the elapsed
 time scaled by the cost still to do over the cost done, averaged over the whole
 run; it is shown beside the count of tasks.
+
+On a terminal this is a bar redrawn in place.  Elsewhere (a batch system's log
+file, a pipe) it is one plain line per finished batch of tasks, at most every
+``LOG_INTERVAL`` seconds and always for the last task, so that a log holds a
+readable history instead of thousands of carriage returns.
 """
 
+import math
 import sys
+import time
 
 from tqdm import tqdm
 
+#: Seconds between two progress lines when standard error is not a terminal.
+LOG_INTERVAL = 5.0
+
 
 class TaskProgress:
-    """A bar over all tasks of the job, starting at the tasks finished by earlier runs."""
+    """Progress over all tasks of the job, starting at the tasks finished by earlier runs.
 
-    def __init__(self, job_name: str, costs: list[float], already_done: list[float], enabled: bool):
+    ``interactive``: a bar redrawn in place (True) or plain lines (False); by default,
+    whether standard error is a terminal.
+    """
+
+    def __init__(self, job_name: str, costs: list[float], already_done: list[float], enabled: bool,
+                 interactive: bool | None = None, clock=time.monotonic):
         self._job_name = job_name
         self._tasks_total = len(costs) + len(already_done)
         self._tasks_done = len(already_done)
-        self._bar = tqdm(total=sum(costs) + sum(already_done), initial=sum(already_done), desc=self._counted(),
-                         file=sys.stderr, disable=not enabled, dynamic_ncols=True, mininterval=0.5, smoothing=0,
-                         bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed} elapsed, {remaining} left]")
+        if interactive is None:
+            interactive = sys.stderr.isatty()
+        self._bar = None
+        self._lines = None
+        if enabled and interactive:
+            self._bar = tqdm(total=sum(costs) + sum(already_done), initial=sum(already_done), desc=self._counted(),
+                             file=sys.stderr, dynamic_ncols=True, mininterval=0.5, smoothing=0,
+                             bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed} elapsed, {remaining} left]")
+        elif enabled:
+            self._lines = _ProgressLines(sum(costs), clock)
 
     def task_finished(self, cost: float) -> None:
         self._tasks_done += 1
-        self._bar.set_description_str(self._counted(), refresh=False)
-        self._bar.update(cost)
+        if self._bar is not None:
+            self._bar.set_description_str(self._counted(), refresh=False)
+            self._bar.update(cost)
+        elif self._lines is not None:
+            line = self._lines.task_finished(cost, last=self._tasks_done == self._tasks_total)
+            if line:
+                print(f"{self._counted()}, {line}", file=sys.stderr, flush=True)
 
     def close(self) -> None:
-        self._bar.close()
+        if self._bar is not None:
+            self._bar.close()
 
     def _counted(self) -> str:
         return f"{self._job_name} {self._tasks_done}/{self._tasks_total} tasks"
+
+
+class _ProgressLines:
+    """Elapsed time and time left of this run, as text at most every ``LOG_INTERVAL`` seconds."""
+
+    def __init__(self, cost_to_do: float, clock):
+        self._cost_to_do = cost_to_do
+        self._cost_done = 0.0
+        self._clock = clock
+        self._start = clock()
+        self._last_line = -math.inf
+
+    def task_finished(self, cost: float, last: bool) -> str | None:
+        """``"E elapsed, L left"`` if a line is due (``last``: the job's last task), else None."""
+        self._cost_done += cost
+        now = self._clock()
+        if not last and now - self._last_line < LOG_INTERVAL:
+            return None
+        self._last_line = now
+        elapsed = now - self._start
+        left = elapsed * max(self._cost_to_do - self._cost_done, 0.0) / self._cost_done if self._cost_done > 0 else 0.0
+        return f"{tqdm.format_interval(elapsed)} elapsed, {tqdm.format_interval(left)} left"

@@ -53,7 +53,9 @@ after 200 iterations, and 38 000 spheres awake.  The dynamic rate of (3.29) mult
 ``beta = 10``: that minimisation then has 7 650 pairs deeper than ``eps_c`` and 8 750 spheres
 awake at iteration 200, needs 6.6 instead of 11.1 million sphere updates, and ends at a mean
 overlap of 0.0045 instead of 0.0084.  Whole runs take 15-40 % less time, and the TS-vs-ED table
-is unchanged within its spread (docs/benchmarks.md, session 11).  A faster rate gains little
+is unchanged within its spread (measured 2026-11-22: benchmarks/aggregation_ts.py at N = 1600
+... 102 400, V_f 0.1-0.3; the TS-vs-ED job's e(D_f) at most 1.9 % against 1.8 % at beta = 3,
+mean 0.6 % for both).  A faster rate gains little
 more and stops too early: at ``beta = 30`` two overlapping discs overshoot contact, and the
 iteration stops at a turning point of their oscillation, where for a moment every step is below
 ``eps_s``, with a gap of 0.005 (0.0006 at ``beta = 10``).  The Routh–Hurwitz bound asks
@@ -115,7 +117,8 @@ the inner rectangles: the stepper stops on cells four diameters wide, or on the 
 rectangles where those are finer (:func:`parsim.core.ts.tiles.stopping_cells_per_side`).  In
 the first steps of a run at N = 102 400, V_f = 0.1, minimisations of 40 000 spheres have inner
 rectangles of some 270 spheres each; on the cells, settled regions rest sooner, and the run
-takes 37 s instead of 49 s, with the same TS-vs-ED statistics (docs/benchmarks.md, session 11).
+takes 37 s instead of 49 s, with the same TS-vs-ED statistics (measured 2026-11-22: 37.4 s
+against 48.6 s, seed 1; the TS-vs-ED job's e(D_f) at most 1.8 %, mean 0.6 %).
 
 Jammed tiles.  Settled neighbours can also jam a tile: a sphere pressed by settled spheres
 (each pair at most ``eps_max``) into an anchor (deeper than ``eps_max``) has nowhere to go,
