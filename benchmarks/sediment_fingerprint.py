@@ -97,11 +97,11 @@ ROWS = (
 
 
 def job_parameters(shape, lateral, floor, size_distribution, trial_angle, n_particles) -> dict:
-    """The task's parameters; ``lateral`` "walls-glued" is ``lateral = "walls"``, ``walls = "glued"``."""
+    """The task's parameters; ``lateral`` "walls-glued" is ``lateral = "walls"``, ``wall_contact = "glued"``."""
     shape_parameters, box_length = SHAPES[shape]
     lateral, _, walls = lateral.partition("-")
     if walls:
-        shape_parameters = {**shape_parameters, "walls": walls}
+        shape_parameters = {**shape_parameters, "wall_contact": walls}
     params = {**COMMON, **shape_parameters, "shape": shape, "n_particles": n_particles, "lateral": lateral,
               "floor": floor, "size_distribution": size_distribution, "size_spread": SPREAD[size_distribution],
               "trial_angle": trial_angle}

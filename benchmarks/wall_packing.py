@@ -4,9 +4,9 @@ Visscher-Bolsterli sediments (monodisperse spheres, floor stops particles, trial
 a square box of --box diameters, --spheres spheres, --realizations seeds per model:
 
 * periodic: the reference (phi = 0.5813);
-* frictionless walls (``walls = "frictionless"``, the default): a wall is a sphere of infinite
+* frictionless walls (``wall_contact = "frictionless"``, the default): a wall is a sphere of infinite
   radius, the touching sphere slides along it;
-* glued walls (``walls = "glued"``): the wall holds the touching sphere's centre.
+* glued walls (``wall_contact = "glued"``): the wall holds the touching sphere's centre.
 
 Per model: the packing fraction of the bulk (centres counted in the box --margin diameters away
 from the walls, the floor and the filling height 2 z_cm; each centre carries one sphere volume),
@@ -23,19 +23,19 @@ import numpy as np
 
 from parsim.core import sdbd
 
-MODELS = {"periodic": (sdbd.LATERAL_PERIODIC, sdbd.WALLS_FRICTIONLESS),
-          "frictionless walls": (sdbd.LATERAL_WALLS, sdbd.WALLS_FRICTIONLESS),
-          "glued walls": (sdbd.LATERAL_WALLS, sdbd.WALLS_GLUED)}
+MODELS = {"periodic": (sdbd.LATERAL_PERIODIC, sdbd.WALL_FRICTIONLESS),
+          "frictionless walls": (sdbd.LATERAL_WALLS, sdbd.WALL_FRICTIONLESS),
+          "glued walls": (sdbd.LATERAL_WALLS, sdbd.WALL_GLUED)}
 RADIUS = 0.5
 CONTACT = 1e-7
 
 
-def deposit(box, n, lateral, walls, seed):
+def deposit(box, n, lateral, wall_contact, seed):
     rng = np.random.default_rng(seed)
     drop = RADIUS + rng.random((n, 2)) * (box - 2.0 * RADIUS)
     return sdbd.deposit(np.zeros((1, 3)), np.ones(1), np.array([0, 1]), np.zeros(n, dtype=np.int64),
                         np.full(n, RADIUS), np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), drop, (0.0, 0.0),
-                        (box, box), lateral, sdbd.FLOOR_STOP, walls=walls)
+                        (box, box), lateral, sdbd.FLOOR_STOP, wall_contact=wall_contact)
 
 
 def fraction(x, lo, hi):
@@ -76,7 +76,7 @@ def main():
     parser.add_argument("--realizations", type=int, default=4)
     parser.add_argument("--margin", type=float, default=4.0, help="bulk: diameters from every boundary")
     args = parser.parse_args()
-    deposit(4.0, 10, sdbd.LATERAL_WALLS, sdbd.WALLS_FRICTIONLESS, 0)  # compile first
+    deposit(4.0, 10, sdbd.LATERAL_WALLS, sdbd.WALL_FRICTIONLESS, 0)  # compile first
     print(f"box {args.box:g} diameters, {args.spheres} spheres, {args.realizations} realisations, "
           f"bulk {args.margin:g} diameters from every boundary; mean +- standard error")
     print("| model | bulk phi | wall-layer phi | propped spheres | filling height | s per sediment |")

@@ -105,12 +105,12 @@ def _plane_gaps(x, r, lateral, box_lower, box_upper):
 
 
 def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_xy,
-                   box_upper_xy, lateral, floor, walls="frictionless", overlap_tol=1e-9, contact_tol=1e-7,
+                   box_upper_xy, lateral, floor, wall_contact="frictionless", overlap_tol=1e-9, contact_tol=1e-7,
                    deltas=(1e-7, 1e-6, 1e-5, 1e-4), block_tol=1e-12, max_report=20):
     """Problems found in a sediment (see the module docs); an empty list means valid.
-    ``walls`` is the wall contact model, "frictionless" or "glued"."""
-    if walls not in ("frictionless", "glued"):
-        raise ValueError(f"walls must be 'frictionless' or 'glued', got {walls!r}")
+    ``wall_contact`` is the wall contact model, "frictionless" or "glued"."""
+    if wall_contact not in ("frictionless", "glued"):
+        raise ValueError(f"wall_contact must be 'frictionless' or 'glued', got {wall_contact!r}")
     pos = np.asarray(positions, float)
     rad = np.asarray(radii, float)
     part = np.asarray(particle, np.int64)
@@ -172,7 +172,7 @@ def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_
         on_floor = bool(np.any(pk == 0))
         sliding = []  # normals of frictionless wall contacts (pivots at infinity)
         for i, k in zip(pi, pk):
-            if k > 0 and walls == "frictionless":
+            if k > 0 and wall_contact == "frictionless":
                 sliding.append(WALL_NORMALS[k - 1])
             else:
                 pivots.append(a[i].copy())

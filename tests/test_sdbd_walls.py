@@ -4,7 +4,8 @@ A frictionless wall only pushes horizontally, so it never holds a particle up by
 particle touching a wall and nothing below falls, a particle touching a wall and one sediment
 sphere rolls about the axis through that sphere's centre along the wall's normal (it slides
 along the wall), and the bulk of a walled sediment packs as a periodic one.  The former model,
-in which a wall holds the touching sphere's centre fixed ("glued"), stays available by name.
+in which a wall holds the touching sphere's centre fixed (``wall_contact = "glued"``), stays
+available by name.
 """
 
 import numpy as np
@@ -16,16 +17,15 @@ from parsim.core.shapes import random_rotations
 from . import sediment_checks as sc
 
 SPHERE = (np.zeros((1, 3)), np.ones(1))
-WALL_MODELS = {"frictionless": sdbd.WALLS_FRICTIONLESS, "glued": sdbd.WALLS_GLUED}
 
 
-def deposit_spheres(scale, drop, box, lateral, floor, walls=sdbd.WALLS_FRICTIONLESS):
+def deposit_spheres(scale, drop, box, lateral, floor, wall_contact=sdbd.WALL_FRICTIONLESS):
     """Spheres of radius ``scale`` dropped at ``drop`` in the square box [0, box]^2."""
     n = len(scale)
     offsets, radii = SPHERE
     return sdbd.deposit(offsets, radii, np.array([0, 1]), np.zeros(n, dtype=np.int64), scale,
                         np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), drop, (0.0, 0.0), (box, box), lateral, floor,
-                        walls=walls)
+                        wall_contact=wall_contact)
 
 
 def wall_contacts_of_spheres(res, box, tol=1e-7):
@@ -57,7 +57,7 @@ def test_a_sphere_released_against_a_wall_onto_a_sphere_slides_down_to_the_floor
 def test_a_glued_wall_holds_the_sphere_on_the_side_of_the_other():
     scale = np.array([1.0, 0.5])
     drop = np.array([[1.0, 5.0], [0.5, 5.3]])
-    res = deposit_spheres(scale, drop, 10.0, sdbd.LATERAL_WALLS, sdbd.FLOOR_STOP, walls=sdbd.WALLS_GLUED)
+    res = deposit_spheres(scale, drop, 10.0, sdbd.LATERAL_WALLS, sdbd.FLOOR_STOP, wall_contact=sdbd.WALL_GLUED)
     assert res.positions[1, 2] > 1.0
     assert res.state[1] == sdbd.HANGING_TWO
 
@@ -85,12 +85,12 @@ def test_the_glued_model_props_spheres_on_walls():
     n, box = 600, 8.0
     scale = rng.uniform(0.35, 0.65, n)
     drop = scale[:, None] + rng.random((n, 2)) * (box - 2.0 * scale[:, None])
-    res = deposit_spheres(scale, drop, box, sdbd.LATERAL_WALLS, sdbd.FLOOR_STOP, walls=sdbd.WALLS_GLUED)
+    res = deposit_spheres(scale, drop, box, sdbd.LATERAL_WALLS, sdbd.FLOOR_STOP, wall_contact=sdbd.WALL_GLUED)
     walls, spheres = wall_contacts_of_spheres(res, box)
     off_floor = res.positions[:, 2] - res.radii > 1e-7
     assert np.count_nonzero(off_floor & (walls >= 1) & (walls + spheres < 3)) > 0
     problems = sc.check_sediment(res.positions, res.radii, res.particle, res.center_of_mass, res.state,
-                                 (0.0, 0.0), (box, box), sdbd.LATERAL_WALLS, sdbd.FLOOR_STOP, walls="glued")
+                                 (0.0, 0.0), (box, box), sdbd.LATERAL_WALLS, sdbd.FLOOR_STOP, wall_contact="glued")
     assert problems == []
 
 

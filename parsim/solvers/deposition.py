@@ -27,7 +27,7 @@ from parsim.solver import LENGTH_UNITS, Configuration, Coordinate, Solver, Stati
 SHAPES = ("sphere", "rod", "four_rods", "tripod", "spiky", "cube", "ellipsoid", "superellipsoid", "agglomerate")
 LATERAL = {"periodic": sdbd.LATERAL_PERIODIC, "walls": sdbd.LATERAL_WALLS, "none": sdbd.LATERAL_NONE}
 FLOOR = {"stop": sdbd.FLOOR_STOP, "roll": sdbd.FLOOR_ROLL}
-WALLS = {"frictionless": sdbd.WALLS_FRICTIONLESS, "glued": sdbd.WALLS_GLUED}
+WALL_CONTACTS = {"frictionless": sdbd.WALL_FRICTIONLESS, "glued": sdbd.WALL_GLUED}
 SIZE_DISTRIBUTIONS = ("monodisperse", "uniform", "lognormal")
 SMOOTH_SHAPES = ("ellipsoid", "superellipsoid")
 SIZE_KEYS = {"rod": "shape_size", "four_rods": "shape_size", "tripod": "shape_size", "spiky": "shape_size",
@@ -75,11 +75,11 @@ PARAMETERS = (
     Parameter("box_length", float, 50.0, LENGTH_UNITS, "side of the square bottom [0, box_length]^2 "
               "(periodic or walled)", low=0.0, low_inclusive=False),
     Parameter("lateral", str, "periodic", "1", "lateral boundaries: periodic, walls (four rigid vertical walls, "
-              "see walls), none (a heap on an unbounded floor)", choices=tuple(LATERAL)),
-    Parameter("walls", str, "frictionless", "1", "wall contact with lateral = walls: frictionless (a sphere of "
-              "infinite radius: the wall pushes only along its normal and a touching sphere slides along it) or "
-              "glued (the wall holds the touching sphere's centre: it pivots about it, no sliding)",
-              choices=tuple(WALLS), affects_seed=False),
+              "see wall_contact), none (a heap on an unbounded floor)", choices=tuple(LATERAL)),
+    Parameter("wall_contact", str, "frictionless", "1", "wall contact model of lateral = walls: frictionless "
+              "(a sphere of infinite radius: the wall pushes only along its normal and a touching sphere slides "
+              "along it) or glued (the wall holds the touching sphere's centre: it pivots about it, no sliding)",
+              choices=tuple(WALL_CONTACTS), affects_seed=False),
     Parameter("floor", str, "stop", "1", "floor z = 0: stop (the paper: a particle touching it is immobilised) "
               "or roll (the floor contact acts as a pivot and the particle keeps rolling)", choices=tuple(FLOOR)),
     Parameter("drop_radius", float, 5.0, LENGTH_UNITS, "with lateral = none: particles are released uniformly "
@@ -216,8 +216,8 @@ def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
     skip = int(params["timing_skip_fraction"] * n)
     result = sdbd.deposit(offsets, radii, np.array([0, len(radii)]), np.zeros(n, dtype=np.int64), scale, rotation,
                           drop_xy, lower, upper, LATERAL[params["lateral"]], FLOOR[params["floor"]],
-                          walls=WALLS[params["walls"]], trial_angle=params["trial_angle"], cycle_n=params["cycle_n"],
-                          cycle_eps=params["cycle_eps"],
+                          wall_contact=WALL_CONTACTS[params["wall_contact"]], trial_angle=params["trial_angle"],
+                          cycle_n=params["cycle_n"], cycle_eps=params["cycle_eps"],
                           max_events_per_particle=params["max_events_per_particle"],
                           clock_from_particle=skip if skip < n else -1)
     if result.stopped_at >= 0:

@@ -46,8 +46,8 @@ Where this implementation departs from, or makes precise, the printed paper:
 * unstable equilibria (centre of mass straight above a pivot or above the axis of two)
   are tipped about a fixed horizontal axis instead of balancing forever;
 * a wall is frictionless by default: a sphere of infinite radius, whose pivot at infinity
-  lets the touching sphere slide along it (``WALLS_FRICTIONLESS``); the glued model
-  (``WALLS_GLUED``), in which a wall, like the floor under FLOOR_ROLL, holds the touching
+  lets the touching sphere slide along it (``WALL_FRICTIONLESS``); the glued model
+  (``WALL_GLUED``), in which a wall, like the floor under FLOOR_ROLL, holds the touching
   sphere's centre as a pivot, is kept by name; see :mod:`.engine`.
 
 The numba cache of every kernel is stamped with all of :mod:`parsim.core`'s sources (see
@@ -73,8 +73,8 @@ from parsim.core.sdbd.constants import (
     RESTING_ON_FLOOR,
     RESTING_THREE_CONTACTS,
     STATE_NAMES,
-    WALLS_FRICTIONLESS,
-    WALLS_GLUED,
+    WALL_FRICTIONLESS,
+    WALL_GLUED,
 )
 
 __all__ = [
@@ -83,8 +83,8 @@ __all__ = [
     "DepositionResult",
     "EVENT_KINDS",
     "STATE_NAMES",
-    "WALLS_FRICTIONLESS",
-    "WALLS_GLUED",
+    "WALL_FRICTIONLESS",
+    "WALL_GLUED",
     "LATERAL_PERIODIC",
     "LATERAL_WALLS",
     "LATERAL_NONE",
@@ -137,7 +137,7 @@ class DepositionResult(NamedTuple):
 def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
             particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
             trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
-            clock_from_particle=-1, walls=WALLS_FRICTIONLESS):
+            clock_from_particle=-1, wall_contact=WALL_FRICTIONLESS):
     """Deposit particles one after the other by steepest descent; see the module docs.
 
     Parameters
@@ -173,23 +173,23 @@ def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_sc
     clock_from_particle : int
         Measure the wall-clock time spent on particles from this index on
         (``clocked_seconds``); -1: no clock.
-    walls : int
-        Wall contact model of LATERAL_WALLS: WALLS_FRICTIONLESS (a sphere of infinite radius,
-        the touching sphere slides along the wall) or WALLS_GLUED (the wall holds the touching
+    wall_contact : int
+        Wall contact model of LATERAL_WALLS: WALL_FRICTIONLESS (a sphere of infinite radius,
+        the touching sphere slides along the wall) or WALL_GLUED (the wall holds the touching
         sphere's centre).
     """
     return deposit_with_diagnostics(
         shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
         particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
         trial_angle, cycle_n, cycle_eps, max_events_per_particle,
-        clock_from_particle=clock_from_particle, walls=walls)[0]
+        clock_from_particle=clock_from_particle, wall_contact=wall_contact)[0]
 
 
 def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_shape,
                              particle_scale, particle_rotation, particle_drop_xy, box_lower_xy,
                              box_upper_xy, lateral, floor, trial_angle=1e-2, cycle_n=4,
                              cycle_eps=1e-3, max_events_per_particle=100_000, clock_from_particle=-1,
-                             walls=WALLS_FRICTIONLESS, check_overlaps=False,
+                             wall_contact=WALL_FRICTIONLESS, check_overlaps=False,
                              trace_particle=-1, trace_steps=0):
     """:func:`deposit` plus a dict of diagnostics, for tests and benchmarks.
 
@@ -241,8 +241,8 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
         raise ValueError(f"lateral must be LATERAL_PERIODIC (0), LATERAL_WALLS (1) or LATERAL_NONE (2), got {lateral}")
     if floor not in (FLOOR_STOP, FLOOR_ROLL):
         raise ValueError(f"floor must be FLOOR_STOP (0) or FLOOR_ROLL (1), got {floor}")
-    if walls not in (WALLS_FRICTIONLESS, WALLS_GLUED):
-        raise ValueError(f"walls must be WALLS_FRICTIONLESS (0) or WALLS_GLUED (1), got {walls}")
+    if wall_contact not in (WALL_FRICTIONLESS, WALL_GLUED):
+        raise ValueError(f"wall_contact must be WALL_FRICTIONLESS (0) or WALL_GLUED (1), got {wall_contact}")
     if not (np.isfinite(trial_angle) and 0.0 <= trial_angle < np.pi):
         raise ValueError(f"trial_angle must be in [0, pi), got {trial_angle}")
     if int(cycle_n) != cycle_n or not 0 <= cycle_n <= 28:
@@ -315,7 +315,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     diag = np.full(4, np.nan)
     trace = np.full((max(int(trace_steps), 1), 16), np.nan)
     stopped_at, n_written = engine.run_deposition(
-        offsets, radii, start, pshape, pscale, prot, pxy, *g, int(floor), int(walls), float(trial_angle),
+        offsets, radii, start, pshape, pscale, prot, pxy, *g, int(floor), int(wall_contact), float(trial_angle),
         int(cycle_n), float(cycle_eps), int(max_events_per_particle), ell,
         bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), out_pos, out_rad,
         out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag)

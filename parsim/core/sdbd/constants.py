@@ -19,10 +19,10 @@ LATERAL_NONE = 2
 #: normal, its pivot lies at infinity behind it, so the wall never holds a particle up by
 #: itself, and with one other pivot ``P`` the particle rotates about the axis through ``P``
 #: along the wall's normal, the touching sphere sliding along the wall.
-WALLS_FRICTIONLESS = 0
+WALL_FRICTIONLESS = 0
 #: A wall contact holds the touching sphere's centre fixed (a pivot about that centre, no
 #: sliding), like the floor under FLOOR_ROLL.
-WALLS_GLUED = 1
+WALL_GLUED = 1
 
 #: The paper's floor: a particle touching the plane ``z = 0`` is immobilised at once.
 FLOOR_STOP = 0

@@ -21,11 +21,36 @@ The candidate motions are those of the paper (Fig. 2, 3.2, 3.3):
 * rotation on two contacts ``k, m`` (3.3): axis along ``P_m - P_k`` (eq. 24), the sense
   that lowers the centre of mass, slope ``|(u x d)_z| / |u x d|``.
 
-A frictionless wall (``sliding_walls``) is a sphere of infinite radius whose centre lies at
-infinity behind the wall: the axis through a pivot ``P`` and that point is the line through
-``P`` along the wall's normal (the touching sphere slides along the wall), a rotation on the
-wall alone is a translation along the wall, i.e. the fall, and two walls make no axis (their
-"rotation" is the vertical translation, the fall again).
+Frictionless walls (``sliding_walls``).  A wall of inward normal ``N`` (horizontal) is the
+paper's sphere obstacle with its radius taken to infinity: its centre, the pivot, lies at
+``P_w = a_w - R N`` with ``R -> infinity`` (``a_w`` the touching moving sphere).  Each motion of
+the paper becomes, in that limit:
+
+* fall (3.1, eqs. 1-2): the contact normal ``N`` has ``N_z = 0``, so the wall never blocks it
+  (3.2.3 holds with equality);
+* rotation on the wall alone (3.2, eq. 6): the centre of mass moves on the sphere
+  ``|r_cm - P_w| = const``, which becomes the plane ``N . r_cm = const``; its path of steepest
+  descent there is vertical, so this motion is the fall and is not a candidate of its own;
+* rotation on a pivot ``P`` and the wall (3.3, eq. 24): the axis along ``P_w - P`` becomes the
+  line through ``P`` along ``N``; every point keeps ``N . x``, so the wall's sphere stays
+  tangent to the wall and slides along it, and the slope is that of eq. 24 with ``u = N``;
+* two walls: both pivots at infinity, no axis; the only motion keeping both is the vertical
+  translation, the fall again;
+* loss of the pivot ``P`` (eq. 17) leaves the wall alone: the fall, decided anew;
+* release from the wall while rolling on ``P`` and the wall (eqs. 25-30): rolling on ``P`` alone
+  moves ``a_w`` at the rate ``(N . d)(z_aw - z_P)`` away from the wall, ``d = r_cm - P``; ``N . d``
+  is constant about an axis along ``N``, so the release is ``a_w`` crossing the height of ``P``
+  (:func:`.events.sliding_wall_release_plane`);
+* rest (3.3.2, Fig. 2): no rotation descends.  For three pivots with one wall, the support
+  "triangle" has a vertex at infinity in the direction ``-N``: the centre of mass rests when its
+  horizontal projection lies in the half-strip bounded by the segment between the two finite
+  pivots and the two rays from them towards the wall, which is what testing the rotations about
+  each finite pivot with ``N`` and about the pair of finite pivots decides;
+* hanging (eq. 32) on a pivot and the wall: the centre of mass straight below the line through
+  ``P`` along ``N``; straight above it is an unstable equilibrium and is tipped like the others.
+
+With glued walls a wall's pivot is the touching sphere's own centre, like the floor's under
+FLOOR_ROLL.
 
 A candidate is *valid* when every other contact opens or stays closed under it: the rate
 ``N_l . (omega x (a_l - P))`` of its gap is positive, or, when it is tangent within

@@ -26,12 +26,12 @@ A particle that needs more than ``max_events`` decide-and-move steps stops the r
 
 Boundary modelling choices (not in the paper):
 
-* a frictionless wall (``WALLS_FRICTIONLESS``, the default) is a sphere of infinite radius
+* a frictionless wall (``WALL_FRICTIONLESS``, the default) is a sphere of infinite radius
   centred at infinity behind it: it never holds a particle up by itself (rolling on it alone
   is the fall), and with one other pivot the particle rotates about the axis through that
   pivot along the wall's normal, its touching sphere sliding along the wall
   (:mod:`.decision`, :func:`.events.sliding_wall_release_plane`);
-* a glued wall (``WALLS_GLUED``) and, under FLOOR_ROLL, the floor pivot about the centre of
+* a glued wall (``WALL_GLUED``) and, under FLOOR_ROLL, the floor pivot about the centre of
   the moving sphere that touches the plane: the plane holds that sphere (no sliding), the
   sphere stays tangent to the plane, and its contact opens when the particle rolls away;
 * under FLOOR_STOP (the paper) the first floor contact immobilises the particle;
@@ -65,7 +65,7 @@ from parsim.core.sdbd.constants import (
     RESTING_ON_FLOOR,
     RESTING_THREE_CONTACTS,
     VIRTUAL_ANGLE,
-    WALLS_FRICTIONLESS,
+    WALL_FRICTIONLESS,
 )
 from parsim.core.sdbd.contacts import fill_contacts, keep_touching
 from parsim.core.sdbd.cycling import after_move, close_near_obstacles, forget_descents, new_descent_history
@@ -90,7 +90,7 @@ D_CLOCKED_SECONDS = 3  # wall-clock seconds from the start of particle clock_fro
 def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                    particle_rotation, particle_drop_xy,
                    geom, igeom, head, col_top, nxt, hkeys, hval, counts,
-                   floor_mode, wall_model, trial_angle, cycle_n, cycle_eps, max_events, ell,
+                   floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell,
                    debug, trace_particle, trace, clock_from,
                    out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state,
                    out_events, out_steps, diag):
@@ -119,7 +119,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     # section 4.1 for it); VIRTUAL_ANGLE only when the trial test is disabled
     virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
     settings = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
-                        igeom[0] == LATERAL_WALLS, wall_model == WALLS_FRICTIONLESS, debug)
+                        igeom[0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, debug)
     grid = Grid(geom, igeom, head, col_top, nxt, hkeys, hval, counts)
     record = Record(out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state, out_events,
                     out_steps)
