@@ -12,6 +12,8 @@ import sys
 import numpy as np
 import xarray as xr
 
+from parsim.solver import flag_value
+
 COLUMNS = ("n_spheres", "volume_fraction", "D_f ED", "D_f TS", "e(D_f)", "N_c ED", "N_c TS",
            "max dP/P_ED", "A_r ED", "A_r TS", "mean abs D_x ED", "mean abs D_x TS")
 
@@ -26,8 +28,9 @@ def method_comparison(dataset: xr.Dataset) -> list[dict]:
         raise ValueError("the dataset must have a 'method' dimension holding 'ed' and 'ts' (sweep method)")
     mean = dataset.mean("realization")
     ed, ts = mean.sel({"method": "ed"}), mean.sel({"method": "ts"})
-    orientation_ed = abs(dataset.orientation.sel({"method": "ed", "component": "x"})).mean("realization")
-    orientation_ts = abs(dataset.orientation.sel({"method": "ts", "component": "x"})).mean("realization")
+    x_component = flag_value(dataset.component.attrs, "x")
+    orientation_ed = abs(dataset.orientation.sel({"method": "ed", "component": x_component})).mean("realization")
+    orientation_ts = abs(dataset.orientation.sel({"method": "ts", "component": x_component})).mean("realization")
     rows = []
     swept = [name for name in ("n_spheres", "volume_fraction") if name in dataset.dims]
     for n in np.atleast_1d(dataset["n_spheres"].values):

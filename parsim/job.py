@@ -7,6 +7,7 @@ A job file is TOML::
     seed = 2024                    # job seed; every task's stream derives from it
     realizations = 4               # realisations per parameter point
     output = "output/quickstart"   # folder, relative to the working directory
+    length_unit = "m"              # UDUNITS units of the job's numbers (defaults m, s, kg)
 
     [parameters]                   # fixed parameters of the solver
     radius = 0.2
@@ -22,7 +23,7 @@ import hashlib
 import math
 import os
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,50 @@ import numpy as np
 from parsim.errors import JobError
 from parsim.solver import Solver
 
-TOP_LEVEL_KEYS = ("name", "kind", "seed", "realizations", "output", "parameters", "sweep")
+SI_PREFIXES = ("Y", "Z", "E", "P", "T", "G", "M", "k", "h", "da", "d", "c", "m", "u", "n", "p", "f", "a", "z", "y")
+"""The SI prefixes as UDUNITS spells them (u: micro)."""
+
+
+@dataclass(frozen=True)
+class UnitKey:
+    """A top-level key naming the unit of one quantity, as a UDUNITS symbol.
+
+    Allowed: ``base`` with an SI prefix or none, or one of ``others`` (symbols taken without
+    prefix).  This small grammar stands in for the UDUNITS library, which parsim does not need
+    at run time: every symbol it accepts is a UDUNITS unit of the quantity.  The unit only labels
+    the job's numbers (the dataset's ``units``); it changes no number and no random stream.
+    """
+
+    key: str
+    quantity: str
+    default: str
+    base: str
+    others: tuple[str, ...] = ()
+
+    def accepts(self, symbol: Any) -> bool:
+        return isinstance(symbol, str) and (symbol in self.others or
+                                            any(symbol == prefix + self.base for prefix in ("", *SI_PREFIXES)))
+
+    def allowed(self) -> str:
+        examples = ", ".join(repr(symbol) for symbol in dict.fromkeys((self.default, "m" + self.base, "u" + self.base)))
+        others = f", or one of {', '.join(repr(o) for o in self.others)}" if self.others else ""
+        return (f"a UDUNITS {self.quantity} unit: {self.base!r} with an SI prefix ({' '.join(SI_PREFIXES)}) "
+                f"or none, e.g. {examples}{others}")
+
+
+UNIT_KEYS = (
+    UnitKey("length_unit", "length", "m", base="m"),
+    UnitKey("time_unit", "time", "s", base="s", others=("min", "h", "d")),
+    UnitKey("mass_unit", "mass", "kg", base="g"),
+)
+
+
+def default_units() -> dict[str, str]:
+    return {unit.quantity: unit.default for unit in UNIT_KEYS}
+
+
+TOP_LEVEL_KEYS = ("name", "kind", "seed", "realizations", "output", *(unit.key for unit in UNIT_KEYS),
+                  "parameters", "sweep")
 REQUIRED_TOP_LEVEL = ("name", "kind", "seed", "realizations")
 TOML_INTEGERS = (-2**63, 2**63 - 1)
 """The integers of a TOML file (64-bit); tomllib returns larger ones too."""
@@ -66,6 +110,7 @@ class Job:
     sweep: dict[str, list]  # swept parameter -> values, in file order
     text: str  # the job file as written
     input_hashes: dict[str, dict[str, str]]  # file parameter -> {path as written: SHA-256 of the content}
+    units: dict[str, str] = field(default_factory=default_units)  # quantity -> UDUNITS symbol, e.g. "length": "m"
 
     @property
     def sweep_shape(self) -> tuple[int, ...]:
@@ -105,6 +150,11 @@ class Job:
         """
         lines = [f"{path} {digest}" for files in self.input_hashes.values() for path, digest in files.items()]
         return {"input_files": "\n".join(lines)}
+
+    @property
+    def unit_attributes(self) -> dict[str, str]:
+        """The job's units as attributes of the dataset and task files (``length_unit``, ``time_unit``, ...)."""
+        return {unit.key: self.units[unit.quantity] for unit in UNIT_KEYS}
 
     def describe_point(self, point: int) -> str:
         params = self.point_parameters(point)
@@ -160,13 +210,15 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
     if not isinstance(out, (str, Path)):
         fail(f"output = {out!r}: must be a string (a folder path)")
 
+    units = {unit.quantity: _unit(document, unit, fail) for unit in UNIT_KEYS}
     fixed, sweep = _parameters(document, solver, source, fail)
     n_points = math.prod(len(values) for values in sweep.values())
     if n_points * realizations > MAX_TASKS:
         fail(f"{n_points} parameter points x {realizations} realizations = {n_points * realizations} tasks; "
              f"allowed: at most {MAX_TASKS} tasks (each writes a file); lower realizations or the [sweep]")
     job = Job(name=name, kind=kind, seed=seed, realizations=realizations, output=Path(out),
-              fixed=fixed, sweep=sweep, text=text, input_hashes=_input_hashes(solver, fixed, sweep, fail))
+              fixed=fixed, sweep=sweep, text=text, input_hashes=_input_hashes(solver, fixed, sweep, fail),
+              units=units)
     for point in range(job.n_points):
         params = job.point_parameters(point)
         try:
@@ -275,6 +327,13 @@ def _top(document: dict, key: str, expected: type, fail) -> Any:
     if not isinstance(value, expected) or isinstance(value, bool):
         fail(f"{key} = {value!r}: must be {'an integer' if expected is int else 'a string'}")
     return value
+
+
+def _unit(document: dict, unit: UnitKey, fail) -> str:
+    symbol = document.get(unit.key, unit.default)
+    if not unit.accepts(symbol):
+        fail(f"{unit.key} = {symbol!r}: allowed: {unit.allowed()}")
+    return symbol
 
 
 def _table(document: dict, key: str, fail) -> dict:

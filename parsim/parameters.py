@@ -7,7 +7,7 @@ writes the job file reference, and gives the dataset coordinates their units.
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 from parsim.errors import JobError
 
@@ -29,6 +29,9 @@ class Parameter:
     condition, so methods can be compared task by task.  ``is_file=True`` marks
     the path of an input file (a string; empty: no file): the job records the
     SHA-256 of the file's content, and a resume refuses a changed file.
+    ``read_when(params)`` says whether the task of a parameter point reads the parameter,
+    for a key of one method only (None: every task reads it); a fixed parameter that no
+    task of a job reads is not a coordinate of the job's dataset.
     """
 
     name: str
@@ -44,10 +47,15 @@ class Parameter:
     sweepable: bool = True
     affects_seed: bool = True
     is_file: bool = False
+    read_when: Callable[[dict], bool] | None = None
 
     @property
     def required(self) -> bool:
         return self.default is REQUIRED
+
+    def is_read(self, params: dict) -> bool:
+        """Whether the task of the parameter point ``params`` reads this parameter."""
+        return self.read_when is None or self.read_when(params)
 
     def allowed(self) -> str:
         """The allowed values, as the error messages and the docs state them."""

@@ -16,6 +16,7 @@ def describe_output(root: Path) -> str:
         raise JobError(f"{root} is not a parsim output folder (no {folder.job_copy.name} in it)")
     job = parse_job(folder.job_copy.read_text(), SOLVERS, source=str(folder.job_copy), output=root)
     folder = OutputFolder(root, job.name)
+    folder.check_schema()
     tasks = job.tasks()
     done = sum(folder.is_finished(task) for task in tasks)
 

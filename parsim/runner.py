@@ -102,8 +102,9 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
         if group.Get_rank() > 0:
             return
         result.statistics["wall_time"] = time.perf_counter() - start
-        attrs = {**params, **job.input_attributes, "job_name": job.name, "job_seed": job.seed, "spawn_key": list(seed.spawn_key),
-                 "point": task.point, "realization": task.realization}
+        attrs = {**params, **job.input_attributes, **job.unit_attributes, "job_name": job.name,
+                 "job_seed": job.seed, "spawn_key": list(seed.spawn_key), "point": task.point,
+                 "realization": task.realization}
         with writing:
             write_task_file(folder.task_path(task), result, attrs)
 

@@ -18,8 +18,32 @@ from parsim.parameters import Parameter
 if TYPE_CHECKING:  # importing mpi4py.MPI initialises MPI, which `parsim validate` does not need
     from mpi4py import MPI
 
-LENGTH_UNITS = "job_length_unit"
-TIME_UNITS = "job_time_unit"
+LENGTH_UNITS = "{length}"
+TIME_UNITS = "{time}"
+MASS_UNITS = "{mass}"
+SPEED_UNITS = f"{LENGTH_UNITS} {TIME_UNITS}-1"
+"""Units of declarations whose unit the job chooses (keys ``length_unit``, ``time_unit``, ``mass_unit``):
+placeholders that :func:`resolve_units` replaces with the job's UDUNITS symbols, e.g. "m s-1"."""
+
+
+def resolve_units(text: str, units: dict[str, str]) -> str:
+    """``text`` with the placeholders of the job's units replaced by ``units`` ({"length": "m", ...})."""
+    for quantity, symbol in units.items():
+        text = text.replace(f"{{{quantity}}}", symbol)
+    return text
+
+
+def flag_attributes(meanings: tuple[str, ...], dtype: str = "int8") -> dict:
+    """CF attributes of a variable that codes ``meanings`` as the integers 0, 1, ... (CF section 3.5)."""
+    return {"flag_values": np.arange(len(meanings), dtype=dtype), "flag_meanings": " ".join(meanings)}
+
+
+def flag_value(attrs: dict, meaning: str) -> int:
+    """The integer that a flag-coded variable with attributes ``attrs`` stores for ``meaning``."""
+    meanings = attrs["flag_meanings"].split()
+    if meaning not in meanings:
+        raise KeyError(f"{meaning!r} is not one of the flag meanings {', '.join(meanings)}")
+    return int(np.atleast_1d(attrs["flag_values"])[meanings.index(meaning)])
 
 
 @dataclass(frozen=True)
@@ -43,11 +67,12 @@ class Statistic:
 
 @dataclass(frozen=True)
 class Coordinate:
-    """Values and CF attributes of an observable dimension."""
+    """Values and CF attributes of an observable dimension; ``attrs`` adds CF attributes (e.g. flags)."""
 
     values: np.ndarray
     units: str
     long_name: str
+    attrs: dict = field(default_factory=dict)
 
 
 @dataclass

@@ -83,6 +83,10 @@ def test_sediment_statistics_and_layout(two_ranks):
         # every particle is accounted for: on the floor, hanging, or resting on three contacts
         assert (ds.particles_on_floor > 0).all() and (ds.filling_height > 0).all()
         assert (ds.bulk_packing_fraction.sel(shape="sphere") > 0.5).all()
+        # the parameters some task reads are scalar coordinates, those no task reads are not
+        assert {"shape_size", "box_length", "sphere_radius", "trial_angle"} <= set(ds.coords)
+        assert not {"shape_spacing", "semi_axis_x", "exponent_vertical", "shape_spheres", "agglomerate_file",
+                    "wall_contact", "drop_radius", "size_spread"} & set(ds.coords)
     arrays = snapshot_arrays(two / "tasks" / "p0001_r0000.h5")
     particle = arrays["spheres/particle"]
     assert np.all(np.diff(particle) >= 0) and particle[-1] == 149  # deposition order, contiguous

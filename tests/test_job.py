@@ -12,11 +12,14 @@ import h5py
 import numpy as np
 import pytest
 
+import parsim
 from parsim.agglomerate_file import read_agglomerate
 from parsim.errors import JobError
 from parsim.job import load_job, parse_job
 from parsim.output.dataset import all_statistics, build_dataset
 from parsim.output.folder import OutputFolder
+from parsim.output.snapshot import OUTPUT_SCHEMA, read_statistics, write_task_file
+from parsim.solver import Configuration, TaskResult
 from parsim.solvers import SOLVERS
 
 BASE = """
@@ -104,6 +107,32 @@ def test_seed_depends_on_task_indices_only_and_not_on_the_method():
 def test_invalid_jobs_name_the_field_and_the_allowed_values(change, message):
     with pytest.raises(JobError, match=message):
         parse(BASE.replace(*change))
+
+
+@pytest.mark.parametrize("line, message", [
+    ('length_unit = "metre"', r"length_unit = 'metre': allowed: a UDUNITS length unit: 'm' with an SI prefix "
+                              r"\(Y Z E P T G M k h da d c m u n p f a z y\) or none, e\.g\. 'm', 'mm', 'um'$"),
+    ('length_unit = "s"', "length_unit = 's': allowed: a UDUNITS length unit: 'm' with an SI prefix"),
+    ("time_unit = 1", r"time_unit = 1: allowed: a UDUNITS time unit: 's' with an SI prefix .* or none, "
+                      r"e\.g\. 's', 'ms', 'us', or one of 'min', 'h', 'd'$"),
+    ('mass_unit = "1"', "mass_unit = '1': allowed: a UDUNITS mass unit: 'g' with an SI prefix"),
+    ('mass_unit = "kilogram"', "mass_unit = 'kilogram': allowed: a UDUNITS mass unit"),
+])
+def test_units_must_be_udunits_symbols_of_their_quantity(line, message):
+    with pytest.raises(JobError, match=f"^job.toml: {message}"):
+        parse(BASE.replace("seed = 7", f"seed = 7\n{line}"))
+
+
+def test_units_label_the_job_and_leave_its_random_streams():
+    default, chosen = parse(BASE), parse(BASE.replace("seed = 7", 'seed = 7\nlength_unit = "um"\ntime_unit = "ms"'
+                                                                  '\nmass_unit = "ng"'))
+    assert default.unit_attributes == {"length_unit": "m", "time_unit": "s", "mass_unit": "kg"}
+    assert chosen.unit_attributes == {"length_unit": "um", "time_unit": "ms", "mass_unit": "ng"}
+    solver = SOLVERS["aggregation"]
+    for task in default.tasks():
+        np.testing.assert_array_equal(default.seed_sequence(task, solver).generate_state(4),
+                                      chosen.seed_sequence(task, solver).generate_state(4))
+    assert default.fixed == chosen.fixed and default.sweep == chosen.sweep
 
 
 @pytest.mark.parametrize("change, message", [
@@ -227,6 +256,7 @@ def resumed(tmp_path, first: str, second: str) -> None:
      "differs in: seed (7 then, 8 now), realizations (2 then, 3 now);"),
     (("radius = 0.2\n[sweep]", "[sweep]\nradius = [0.2]"),
      "differs in: [parameters] radius (0.2 then, unset now), [sweep] radius (unset then, [0.2] now);"),
+    (("seed = 7", 'seed = 7\nlength_unit = "mm"'), "differs in: length_unit ('m' then, 'mm' now);"),
 ])
 def test_resume_names_each_key_that_differs(tmp_path, change, message):
     with pytest.raises(JobError, match=re.escape(message)):
@@ -234,7 +264,8 @@ def test_resume_names_each_key_that_differs(tmp_path, change, message):
 
 
 def test_resume_accepts_the_same_job_written_differently(tmp_path):
-    resumed(tmp_path, BASE, "# the same job\n" + BASE.replace("radius = 0.2", "radius = 0.20\nmass = 1.0"))
+    resumed(tmp_path, BASE, "# the same job\n" + BASE.replace("radius = 0.2", "radius = 0.20\nmass = 1.0")
+            .replace("seed = 7", 'seed = 7\nlength_unit = "m"'))
 
 
 def test_resume_refuses_a_changed_input_file(tmp_path):
@@ -252,6 +283,49 @@ def test_resume_refuses_a_changed_input_file(tmp_path):
             f"'{flake}' (its content changed since the first run: sha256 {before[:12]}... then, "
             f"{sha256(flake)[:12]}... now); give another output folder or restore the file")):
         folder.prepare(parse(text), parse(folder.job_copy.read_text()))
+
+
+def folder_with_a_task(tmp_path) -> tuple[OutputFolder, Path]:
+    """An output folder of job BASE holding one finished task file (a single sphere; the statistics of no solver)."""
+    folder = OutputFolder(tmp_path / "out", "t")
+    job = parse(BASE)
+    folder.prepare(job, None)
+    task = job.tasks()[0]
+    configuration = Configuration(arrays={"spheres/position": np.zeros((1, 2)), "spheres/radius": np.ones(1)},
+                                  box_lower=np.zeros(2), box_upper=np.ones(2), periodic=np.zeros(2, dtype=bool))
+    write_task_file(folder.task_path(task), TaskResult({"box_length": 1.0}, configuration), {"point": task.point})
+    return folder, folder.task_path(task)
+
+
+def test_task_files_record_the_parsim_version_and_the_output_schema(tmp_path):
+    _, path = folder_with_a_task(tmp_path)
+    with h5py.File(path) as file:
+        assert file.attrs["parsim_version"] == parsim.__version__ == "0.2.0"
+        assert file.attrs["parsim_output_schema"] == OUTPUT_SCHEMA == 2
+    assert read_statistics(path) == {"box_length": 1.0}
+
+
+@pytest.mark.parametrize("recorded, found", [
+    (None, "an older parsim (output schema 1, which records none)"),
+    (1, "an older parsim (output schema 1)"),
+    (OUTPUT_SCHEMA + 1, f"a newer parsim (output schema {OUTPUT_SCHEMA + 1})"),
+])
+def test_a_folder_of_another_output_schema_is_refused_in_one_line(tmp_path, recorded, found):
+    folder, path = folder_with_a_task(tmp_path)
+    with h5py.File(path, "a") as file:
+        del file.attrs["parsim_output_schema"]
+        if recorded is not None:
+            file.attrs["parsim_output_schema"] = recorded
+    root = tmp_path / "out"
+    expected = (f"output folder {root} was written by {found}; parsim {parsim.__version__} reads and writes output "
+                f"schema {OUTPUT_SCHEMA}: read or finish it with ")
+    with pytest.raises(JobError, match=re.escape(expected)) as refused:
+        folder.prepare(parse(BASE), parse(folder.job_copy.read_text()))
+    message = str(refused.value)
+    assert "\n" not in message and message.endswith(f"into another output folder (key 'output' or option "
+                                                     f"--output) or after removing {root}")
+    with pytest.raises(JobError, match=re.escape(f"task file {path} was written by {found}")):
+        read_statistics(path)  # the dataset assembly checks each file, not with a KeyError
 
 
 def test_supplementary_initial_condition_needs_no_volume_fraction():

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
+import parsim
+from parsim.output.snapshot import OUTPUT_SCHEMA
 from tests.datasets import reproducible_part, run_serial
 from tests.mpi import error_lines, kill_session, mpiexec, parsim_command, run_mpi
 
@@ -65,6 +67,10 @@ def test_task_snapshot_layout(quickstart_two_ranks):
         assert list(snapshot.attrs["periodic"]) == [False, False]
         assert snapshot.attrs["n_spheres"] == n == 400 and snapshot.attrs["volume_fraction"] == 0.2
         assert snapshot.attrs["job_seed"] == 20240611 and list(snapshot.attrs["spawn_key"]) == [4, 1]
+        assert snapshot.attrs["parsim_version"] == parsim.__version__
+        assert snapshot.attrs["parsim_output_schema"] == OUTPUT_SCHEMA
+        units = [snapshot.attrs[key] for key in ("length_unit", "time_unit", "mass_unit")]
+        assert units == ["m", "s", "kg"]
 
 
 @pytest.mark.mpi
@@ -86,6 +92,25 @@ def test_killed_job_resumes_to_the_same_dataset(quickstart_two_ranks, tmp_path):
     assert not list(tmp_path.rglob("*.tmp"))
     xr.testing.assert_identical(reproducible_part(tmp_path / "quickstart.nc"),
                                 reproducible_part(quickstart_two_ranks / "quickstart.nc").assign_attrs())
+
+
+def test_a_folder_of_an_older_parsim_is_refused_in_one_line(tmp_path):
+    """Task files without the schema attribute, as parsim 0.1 wrote them: one line naming folder and schemas."""
+    job = tmp_path / "job.toml"
+    job.write_text(Path(QUICKSTART).read_text().replace("[100, 400, 900]", "[16]").replace("realizations = 4",
+                                                                                          "realizations = 1"))
+    out = tmp_path / "out"
+    assert run_serial("run", str(job), "--output", str(out), "--quiet").returncode == 0
+    for path in (out / "tasks").glob("*.h5"):
+        with h5py.File(path, "a") as task:
+            del task.attrs["parsim_output_schema"], task.attrs["parsim_version"]
+    result = run_serial("run", str(job), "--output", str(out), "--quiet")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert error_lines(result.stderr) == [
+        f"parsim: error: output folder {out} was written by an older parsim (output schema 1, which records none); "
+        f"parsim {parsim.__version__} reads and writes output schema {OUTPUT_SCHEMA}: read or finish it with the parsim "
+        f"that wrote it, or compute the job again into another output folder (key 'output' or option --output) or "
+        f"after removing {out}"]
 
 
 def test_resume_refuses_a_different_job(tmp_path):

@@ -1,15 +1,20 @@
-"""The job's statistics as one xarray Dataset, written as netCDF.
+"""The job's statistics as one xarray Dataset, written as netCDF (CF-1.10).
 
 Dimensions: one per swept parameter (named after it, its values as
 coordinate), then ``realization`` (CF ``standard_name = "realization"``), then
-the observable dimensions a statistic declares (``r``, ``box_size``, ...).
-Fixed parameters are scalar coordinates.  Every variable has ``units`` and
-``long_name``; the global attributes carry the parsim version, the job file
-text, the job seed, the input files with the SHA-256 of their content, the MPI
+the observable dimensions a statistic declares (``r``, ``box_size``, ...; a
+labelled one such as ``component`` holds integer codes named by its
+``flag_values``/``flag_meanings``).  Fixed parameters that some task of the job
+reads are scalar coordinates.  Every variable has UDUNITS ``units`` (in the
+job's ``length_unit``, ``time_unit``, ``mass_unit``) and ``long_name``; no
+coordinate has a ``_FillValue``.  The global attributes carry the parsim version
+and output schema, the papers (``references``), the job file text, the job seed,
+the job's units, the input files with the SHA-256 of their content, the MPI
 size, the ranks per task and the creation time.
 """
 
 import datetime
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -18,13 +23,25 @@ import xarray as xr
 import parsim
 from parsim.job import Job, Task
 from parsim.output.atomic import write_bytes_atomically
-from parsim.solver import Solver, Statistic
+from parsim.output.snapshot import check_schema, provenance_attributes
+from parsim.solver import Solver, Statistic, resolve_units
 
 WALL_TIME = Statistic("wall_time", "s", "wall-clock time of the task on its rank", measured=True)
 """Measured by the runner for every task, whatever the solver."""
 
 MEASURED_ATTRIBUTE = "parsim_measured"
 """Set to 1 on variables that are timings and so differ between two runs of one job."""
+
+REFERENCES = "\n".join((
+    "Topić, N. & Pöschel, T. (2016): Steepest descent ballistic deposition of complex shaped particles. "
+    "J. Comput. Phys. 308, 421–437.",
+    "Degond, P., Dimarco, G., Ferreira, M. A. & Hecht, S. (2024): Modeling ballistic aggregation by time "
+    "stepping approaches. SIAM Journal on Applied Dynamical Systems, in press. hal-04211646, arXiv:2309.09523",
+))
+"""The papers of the deposition and aggregation solvers, one a line (the dataset's ``references``)."""
+
+COORDINATE_ENCODING = {"_FillValue": None}
+"""CF 2.5.1: a coordinate variable has no missing values, hence no ``_FillValue`` (xarray adds NaN to floats)."""
 
 
 def all_statistics(solver: Solver) -> tuple[Statistic, ...]:
@@ -34,6 +51,14 @@ def all_statistics(solver: Solver) -> tuple[Statistic, ...]:
 def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict], mpi_size: int,
                   ranks_per_task: int) -> xr.Dataset:
     """Assemble the dataset; ``statistics_of(task)`` gives one finished task's statistics."""
+    coords = {**_sweep_coordinates(job, solver), **_observable_coordinates(job, solver),
+              **_fixed_coordinates(job, solver)}
+    return xr.Dataset(_statistics_variables(job, solver, statistics_of), coords=coords,
+                      attrs=_global_attributes(job, mpi_size, ranks_per_task))
+
+
+def _statistics_variables(job: Job, solver: Solver, statistics_of: Callable[[Task], dict]) -> dict[str, xr.Variable]:
+    """One variable per statistic, dimensions (sweep..., realization, observable...)."""
     observable = solver.coordinates(job.fixed)
     leading_shape = (*job.sweep_shape, job.realizations)
     statistics = all_statistics(solver)
@@ -48,43 +73,86 @@ def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict
     leading_dims = (*job.sweep, "realization")
     variables = {}
     for s in statistics:
-        attrs = {"units": s.units, "long_name": s.long_name, **s.attrs}
+        attrs = {**_described(job, s.units, s.long_name), **s.attrs}
         if s.measured:
             attrs[MEASURED_ATTRIBUTE] = 1
         variables[s.name] = xr.Variable(leading_dims + s.dims, arrays[s.name], attrs)
+    return variables
 
-    coords = {}
-    for name, values in job.sweep.items():
-        parameter = solver.parameter(name)
-        coords[name] = xr.Variable(name, np.asarray(values), {"units": parameter.units, "long_name": parameter.description})
-    coords["realization"] = xr.Variable("realization", np.arange(job.realizations),
-                                        {"standard_name": "realization", "long_name": "realisation index", "units": "1"})
-    for name, coordinate in observable.items():
-        coords[name] = xr.Variable(name, coordinate.values, {"units": coordinate.units, "long_name": coordinate.long_name})
-    for name, value in job.fixed.items():
-        if value is not None:
-            parameter = solver.parameter(name)
-            coords[name] = xr.Variable((), value, {"units": parameter.units, "long_name": parameter.description})
 
+def _sweep_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
+    """The swept parameters' values and ``realization``: the leading dimensions."""
+    coords = {name: _coordinate(name, np.asarray(values), _parameter_attributes(job, solver, name))
+              for name, values in job.sweep.items()}
+    coords["realization"] = _coordinate("realization", np.arange(job.realizations),
+                                        {"standard_name": "realization", "long_name": "realisation index",
+                                         "units": "1"})
+    return coords
+
+
+def _observable_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
+    return {name: _coordinate(name, coordinate.values,
+                              {**_described(job, coordinate.units, coordinate.long_name), **coordinate.attrs})
+            for name, coordinate in solver.coordinates(job.fixed).items()}
+
+
+def _fixed_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
+    """The fixed parameters as scalar coordinates, leaving out those unset or read by no task of the job."""
+    read = _read_parameters(job, solver)
+    return {name: _coordinate((), value, _parameter_attributes(job, solver, name))
+            for name, value in job.fixed.items() if value is not None and name in read}
+
+
+def _read_parameters(job: Job, solver: Solver) -> set[str]:
+    """The fixed parameters that the task of some point of the job reads (one pass over the points)."""
+    undecided = {name for name in job.fixed if solver.parameter(name).read_when is not None}
+    read = set(job.fixed) - undecided
+    for point in range(job.n_points):
+        if not undecided:
+            break
+        params = job.point_parameters(point)
+        found = {name for name in undecided if solver.parameter(name).is_read(params)}
+        read |= found
+        undecided -= found
+    return read
+
+
+def _coordinate(dims, values, attrs: dict) -> xr.Variable:
+    return xr.Variable(dims, values, attrs, encoding=dict(COORDINATE_ENCODING))
+
+
+def _parameter_attributes(job: Job, solver: Solver, name: str) -> dict:
+    parameter = solver.parameter(name)
+    return _described(job, parameter.units, parameter.description)
+
+
+def _described(job: Job, units: str, long_name: str) -> dict:
+    """``units`` and ``long_name`` with the placeholders of the job's units filled in."""
+    return {"units": resolve_units(units, job.units), "long_name": resolve_units(long_name, job.units)}
+
+
+def _global_attributes(job: Job, mpi_size: int, ranks_per_task: int) -> dict:
     created = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    attrs = {
+    return {
         "Conventions": "CF-1.10",
         "title": f"parsim {job.kind} job '{job.name}'",
         "source": f"parsim {parsim.__version__}",
         "history": f"{created} parsim run (job '{job.name}', {mpi_size} MPI ranks, {ranks_per_task} per task)",
-        "parsim_version": parsim.__version__,
+        "references": REFERENCES,
+        **provenance_attributes(),
         "job_name": job.name,
         "job_kind": job.kind,
         "job_seed": job.seed,
         "job_text": job.text,
+        **job.unit_attributes,
         **job.input_attributes,
         "mpi_size": mpi_size,
         "ranks_per_task": ranks_per_task,
         "date_created": created,
-        "comment": "lengths are in the job's length unit (the unit of the sphere radii), "
-                   "times in that length unit divided by the unit of the initial speed",
+        "comment": "the job's length_unit, time_unit and mass_unit label its numbers and change none (the "
+                   f"solvers have no scale of their own); variables with {MEASURED_ATTRIBUTE} = 1 are timings, "
+                   "which differ between two runs of a job",
     }
-    return xr.Dataset(variables, coords=coords, attrs=attrs)
 
 
 VOLATILE_ATTRIBUTES = ("history", "mpi_size", "ranks_per_task", "date_created")
@@ -94,3 +162,8 @@ VOLATILE_ATTRIBUTES = ("history", "mpi_size", "ranks_per_task", "date_created")
 def write_dataset(dataset: xr.Dataset, path) -> None:
     """Write ``dataset`` as netCDF-4 to ``path`` atomically; it is built in memory, then written in one piece."""
     write_bytes_atomically(path, dataset.to_netcdf(engine="netcdf4"))
+
+
+def check_dataset_schema(dataset: xr.Dataset, path: Path) -> None:
+    """Refuse a dataset (read from ``path``) that another output schema laid out, in one line."""
+    check_schema(dataset.attrs, f"dataset {path}", Path(path).parent)

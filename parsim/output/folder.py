@@ -9,7 +9,9 @@
 
 A task is finished exactly when its file exists: files are written under a
 temporary name and renamed, so a killed run leaves only complete files, and
-running the same command again computes just the missing tasks.
+running the same command again computes just the missing tasks.  A folder whose
+task files record another output schema (:data:`~parsim.output.snapshot.OUTPUT_SCHEMA`)
+is refused, with one line saying so.
 """
 
 import json
@@ -17,8 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from parsim.errors import JobError, OutputError
-from parsim.job import Job, Task
+from parsim.job import UNIT_KEYS, Job, Task
 from parsim.output.atomic import TEMPORARY_SUFFIX, written_atomically
+from parsim.output.snapshot import check_schema, read_schema_attributes
 
 JOB_COPY = "job.toml"
 INPUTS = "inputs.json"
@@ -53,6 +56,7 @@ class OutputFolder:
         of the job's input files are recorded in :attr:`inputs`, and compared on a resume.
         """
         if stored_job is not None:
+            self.check_schema()
             different = _differences(stored_job, job)
             if different:
                 raise JobError(
@@ -69,6 +73,16 @@ class OutputFolder:
                 temporary.write_text(job.text)
         for leftover in self.root.rglob(f"*{TEMPORARY_SUFFIX}"):
             leftover.unlink(missing_ok=True)
+
+    def check_schema(self) -> None:
+        """Refuse a folder whose task files record another output schema than this parsim's.
+
+        One task file stands for all: every run in a folder is refused unless its schema is
+        the folder's (and the dataset assembly checks each file as it reads it).
+        """
+        first = next(self.tasks.glob("p*_r*.h5"), None) if self.tasks.is_dir() else None
+        if first is not None:
+            check_schema(read_schema_attributes(first), f"output folder {self.root}", self.root)
 
     def _check_inputs(self, job: Job) -> None:
         """Refuse to resume ``job`` if an input file recorded by the first run has changed."""
@@ -98,6 +112,7 @@ _UNSET = object()
 def _identity(job: Job) -> dict[str, Any]:
     """What must agree between a run and its resume, key by key (the file's comments and layout need not)."""
     return {"name": job.name, "kind": job.kind, "seed": job.seed, "realizations": job.realizations,
+            **{unit.key: job.units[unit.quantity] for unit in UNIT_KEYS},
             **{f"[parameters] {key}": value for key, value in job.fixed.items()},
             **{f"[sweep] {key}": values for key, values in job.sweep.items()}}
 

@@ -3,9 +3,10 @@
 Layout (DESIGN.md): ``spheres/position`` (n, d), ``spheres/radius`` (n,) and the
 solver's other arrays (``spheres/velocity``, ``spheres/cluster``, ``links``,
 ``spheres/particle``, ...); root attributes ``box_lower``, ``box_upper``,
-``periodic``, the task's parameters and seed.  The group ``statistics`` holds one
-dataset per statistic of the task: it is what the job's netCDF dataset is
-assembled from, so a finished task file is also the resume record of its task.
+``periodic``, the task's parameters and seed, the job's units, ``parsim_version`` and
+``parsim_output_schema``.  The group ``statistics`` holds one dataset per statistic
+of the task: it is what the job's netCDF dataset is assembled from, so a finished
+task file is also the resume record of its task.
 """
 
 import io
@@ -14,11 +15,48 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from parsim.errors import OutputError
+import parsim
+from parsim.errors import JobError, OutputError
 from parsim.output.atomic import write_bytes_atomically
 from parsim.solver import Configuration, TaskResult
 
 STATISTICS_GROUP = "statistics"
+
+OUTPUT_SCHEMA = 2
+"""Version of the layout of the outputs (task files and dataset), recorded in both.
+
+Raise it with any change that would make parsim misread the outputs of an earlier
+version, e.g. a statistic added or a coordinate coded differently.  Schema 2 (parsim
+0.2.0): UDUNITS units, a numeric ``component``, the schema and version recorded.
+"""
+SCHEMA_ATTRIBUTE = "parsim_output_schema"
+VERSION_ATTRIBUTE = "parsim_version"
+UNRECORDED_SCHEMA = 1
+"""The schema of outputs that record none: parsim 0.1 wrote them."""
+
+
+def provenance_attributes() -> dict:
+    """The parsim version and output schema, as attributes of every task file and of the dataset."""
+    return {VERSION_ATTRIBUTE: parsim.__version__, SCHEMA_ATTRIBUTE: OUTPUT_SCHEMA}
+
+
+def check_schema(attrs, subject: str, folder: Path) -> None:
+    """Refuse outputs whose attributes ``attrs`` record another output schema than this parsim's.
+
+    ``subject`` names what is refused ("output folder out", "dataset out/q.nc"); ``folder``
+    is the output folder to compute again.  Raises a one-line :class:`JobError`.
+    """
+    found = int(attrs.get(SCHEMA_ATTRIBUTE, UNRECORDED_SCHEMA))
+    if found == OUTPUT_SCHEMA:
+        return
+    recorded = f"output schema {found}" if SCHEMA_ATTRIBUTE in attrs else f"output schema {found}, which records none"
+    if found < OUTPUT_SCHEMA:
+        written, writer = f"an older parsim ({recorded})", "the parsim that wrote it"
+    else:
+        written, writer = f"a newer parsim ({recorded})", "that parsim or a newer one"
+    raise JobError(f"{subject} was written by {written}; parsim {parsim.__version__} reads and writes output "
+                   f"schema {OUTPUT_SCHEMA}: read or finish it with {writer}, or compute the job again into "
+                   f"another output folder (key 'output' or option --output) or after removing {folder}")
 
 
 def write_task_file(path: Path, result: TaskResult, attrs: dict) -> None:
@@ -36,7 +74,7 @@ def write_task_file(path: Path, result: TaskResult, attrs: dict) -> None:
         file.attrs["box_lower"] = np.asarray(configuration.box_lower, dtype=np.float64)
         file.attrs["box_upper"] = np.asarray(configuration.box_upper, dtype=np.float64)
         file.attrs["periodic"] = np.asarray(configuration.periodic, dtype=bool)
-        for name, value in {**configuration.attrs, **attrs}.items():
+        for name, value in {**configuration.attrs, **attrs, **provenance_attributes()}.items():
             if value is not None:
                 file.attrs[name] = value
         group = file.create_group(STATISTICS_GROUP)
@@ -46,12 +84,24 @@ def write_task_file(path: Path, result: TaskResult, attrs: dict) -> None:
 
 
 def read_statistics(path: Path) -> dict[str, np.ndarray]:
-    """The statistics of a finished task file; an unreadable file is an :class:`OutputError` naming it."""
+    """The statistics of a finished task file; an unreadable file is an :class:`OutputError` naming it,
+    a file of another output schema a :class:`JobError` naming it and its output folder."""
     try:
         with h5py.File(path, "r") as file:
+            check_schema(file.attrs, f"task file {path}", path.parent.parent)
             return {name: dataset[()] for name, dataset in file[STATISTICS_GROUP].items()}
     except (OSError, KeyError) as error:
         raise OutputError(f"cannot read the statistics of task file {path}: {error}; "
+                          "remove the file and run the same command again to recompute its task") from None
+
+
+def read_schema_attributes(path: Path) -> dict:
+    """The root attributes of a task file that say which parsim wrote it (none for parsim 0.1)."""
+    try:
+        with h5py.File(path, "r") as file:
+            return {name: file.attrs[name] for name in (SCHEMA_ATTRIBUTE, VERSION_ATTRIBUTE) if name in file.attrs}
+    except OSError as error:
+        raise OutputError(f"cannot read task file {path}: {error}; "
                           "remove the file and run the same command again to recompute its task") from None
 
 

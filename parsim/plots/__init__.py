@@ -14,6 +14,7 @@ from typing import Callable
 import xarray as xr
 
 from parsim.errors import PlotError
+from parsim.output.dataset import check_dataset_schema
 from parsim.output.folder import JOB_COPY, TASKS, OutputFolder
 from parsim.plots import aggregation, deposition
 from parsim.plots.common import FigureSpec, save
@@ -85,11 +86,14 @@ def _locate(output: Path) -> tuple[Path, Path]:
 
 
 def _open(path: Path) -> xr.Dataset:
+    """The dataset at ``path``; one of another output schema (another coding of ``component``) is refused."""
     try:
         with xr.open_dataset(path) as dataset:
-            return dataset.load()
+            dataset = dataset.load()
     except (OSError, ValueError) as error:
         raise PlotError(f"cannot read {path} as a netCDF dataset: {error}") from None
+    check_dataset_schema(dataset, path)
+    return dataset
 
 
 def _task_file(tasks: Path, label: str | None) -> Path:

@@ -10,12 +10,12 @@ from matplotlib.patches import Rectangle
 
 from parsim.comparison import method_comparison
 from parsim.plots.common import (REALIZATION, axis_label, curves, draw_curve, ensemble, ensemble_figure, figure,
-                                 legend, new_figure, panels, read_snapshot, task_text, titled,
-                                 units_text)
+                                 legend, new_figure, panels, position_label, read_snapshot, task_text,
+                                 titled)
 from parsim.plots.render import distinct_colours, render_spheres
+from parsim.solver import flag_value
 
 FIGURES: dict = {}
-LENGTH = units_text("job_length_unit")
 N_LABEL = "number of spheres $N$"
 COMPARED = ("fractal_dimension", "contact_number", "pair_distribution", "aspect_ratio", "orientation")
 """The variables :func:`parsim.comparison.method_comparison` reads."""
@@ -142,7 +142,8 @@ def orientation(dataset: xr.Dataset) -> Figure:
     point clouds of one N sit side by side.  Isotropic orientations in 2D spread the
     angle uniformly over 0-90 degrees.
     """
-    angle = np.degrees(np.arccos(np.clip(abs(dataset.orientation.sel(component="x")), 0.0, 1.0)))
+    x_component = flag_value(dataset.component.attrs, "x")
+    angle = np.degrees(np.arccos(np.clip(abs(dataset.orientation.sel(component=x_component)), 0.0, 1.0)))
     fig, (ax,) = new_figure(1)
     n = angle["n_spheres"].values.astype(np.float64)
     listed = curves(angle, keep=("n_spheres",))
@@ -181,8 +182,8 @@ def cluster(dataset: xr.Dataset, task_file) -> Figure:
         ax.imshow(image, extent=extent, origin="lower", interpolation="nearest")
     lower, upper = configuration.box_lower[:2], configuration.box_upper[:2]
     ax.add_patch(Rectangle(lower, *(upper - lower), fill=False, edgecolor="0.3", linewidth=0.8))
-    ax.set(xlim=(lower[0], upper[0]), ylim=(lower[1], upper[1]), aspect="equal", xlabel=f"x [{LENGTH}]",
-           ylabel=f"y [{LENGTH}]")
+    ax.set(xlim=(lower[0], upper[0]), ylim=(lower[1], upper[1]), aspect="equal", xlabel=position_label(dataset, "x"),
+           ylabel=position_label(dataset, "y"))
     clusters = len(np.unique(label))
     return titled(fig, dataset, f"{task_text(dataset, task_file, configuration.attrs)}\n"
                                 f"({len(radius)} spheres, {clusters} cluster{'s' if clusters > 1 else ''})")

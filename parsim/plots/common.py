@@ -29,7 +29,7 @@ PANEL_SIZE = (4.8, 3.6)  # inches
 MAX_COLUMNS = 3
 PNG_DPI = 150
 FORMATS = (".png", ".pdf")
-UNIT_TEXT = {"job_length_unit": "length unit", "job_time_unit": "time unit", "-1": "⁻¹"}  # as axes show units
+UNIT_TEXT = {"-1": "⁻¹"}  # as axes show units
 
 
 @dataclass(frozen=True)
@@ -139,6 +139,11 @@ def units_text(units: str | None) -> str | None:
     for name, text in UNIT_TEXT.items():
         units = units.replace(name, text)
     return units
+
+
+def position_label(dataset: xr.Dataset, axis: str) -> str:
+    """"x [m]": a position axis of a pictured task, in the job's length unit."""
+    return f"{axis} [{dataset.attrs['length_unit']}]"
 
 
 def axis_label(variable: xr.DataArray, text: str | None = None) -> str:

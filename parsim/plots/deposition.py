@@ -5,11 +5,10 @@ import xarray as xr
 from matplotlib.figure import Figure
 
 from parsim.plots.common import (BAND_ALPHA, axis_label, curves, ensemble, ensemble_figure, figure, legend,
-                                 new_figure, read_snapshot, task_text, titled, units_text)
+                                 new_figure, position_label, read_snapshot, task_text, titled)
 from parsim.plots.render import distinct_colours, render_spheres
 
 FIGURES: dict = {}
-LENGTH = units_text("job_length_unit")
 SIDE_WINDOW = 1.2  # the side view shows at most this many box widths below the top
 
 
@@ -75,21 +74,22 @@ def sediment(dataset: xr.Dataset, task_file) -> Figure:
     fig = Figure(figsize=(11.0, 5.0), layout="constrained")
     side, top = fig.subplots(1, 2)
     window = z + radius > bottom
-    _draw_view(side, x[window], z[window], y[window], radius[window], colours[window])
+    x_label = position_label(dataset, "x")
+    _draw_view(side, x[window], z[window], y[window], radius[window], colours[window], x_label)
     side.axhline(floor, color="0.3", linewidth=0.8)
-    side.set(xlim=(lower[0], upper[0]), ylim=(bottom, upper[2]), ylabel=f"z [{LENGTH}]")
+    side.set(xlim=(lower[0], upper[0]), ylim=(bottom, upper[2]), ylabel=position_label(dataset, "z"))
     side.set_title("side" if bottom == floor else "side, top of the sediment", fontsize="medium")
-    _draw_view(top, x, y, -z, radius, colours)
-    top.set(xlim=(lower[0], upper[0]), ylim=(lower[1], upper[1]), ylabel=f"y [{LENGTH}]")
+    _draw_view(top, x, y, -z, radius, colours, x_label)
+    top.set(xlim=(lower[0], upper[0]), ylim=(lower[1], upper[1]), ylabel=position_label(dataset, "y"))
     top.set_title("top", fontsize="medium")
     return titled(fig, dataset, f"{task_text(dataset, task_file, configuration.attrs)}\n"
                                 f"({len(particle)} spheres in {particle.max() + 1} particles)")
 
 
-def _draw_view(ax, u, v, depth, radius, colours) -> None:
+def _draw_view(ax, u, v, depth, radius, colours, xlabel: str) -> None:
     image, extent = render_spheres(u, v, depth, radius, colours)
     ax.imshow(image, extent=extent, origin="lower", interpolation="nearest")
-    ax.set(xlabel=f"x [{LENGTH}]", aspect="equal")
+    ax.set(xlabel=xlabel, aspect="equal")
 
 
 def periodic_images(position, radius, lower, upper, periodic) -> tuple[np.ndarray, np.ndarray]:

@@ -27,7 +27,8 @@ from parsim.core.statistics import MIN_FIT_BOX_SIZES, cluster_statistics, fit_bo
 from parsim.core.ts import FORMULATIONS, DahaParameters, MinimiserFailure, simulate_ts
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import REQUIRED, Parameter
-from parsim.solver import LENGTH_UNITS, TIME_UNITS, Configuration, Coordinate, Solver, Statistic, TaskResult
+from parsim.solver import (LENGTH_UNITS, MASS_UNITS, SPEED_UNITS, TIME_UNITS, Configuration, Coordinate, Solver,
+                           Statistic, TaskResult, flag_attributes)
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -35,14 +36,25 @@ if TYPE_CHECKING:
 PAPER_INITIAL_CONDITION = "lattice_isotropic"  # section 4.1: lattice filling the box, eq. 4.3 velocities
 SUPPLEMENTARY_INITIAL_CONDITION = "unit_lattice_uniform"  # supplementary A: spacing 1, V uniform in [-1/2, 1/2]^d
 STOP_REASONS = ("single_cluster", "max_time", "max_events")
+COMPONENTS = ("x", "y", "z")  # names of the Cartesian components, coded 0, 1, 2 in the dataset
 _DAHA = DahaParameters()
 BYTES_PER_SPHERE = 1536  # one task's memory per sphere, see memory()
 WARM_UP_SIDE = {2: 4, 3: 3}  # spheres per side of the warm-up's lattice: 16 discs, 27 spheres
 
 
+def _reads_ts(params: dict) -> bool:
+    return params["method"] == "ts"
+
+
+def _reads_speed(params: dict) -> bool:
+    """Whether a task sets its velocities from ``speed`` (the supplementary initial condition does not)."""
+    return params["initial_condition"] == PAPER_INITIAL_CONDITION
+
+
 def _ts(name, type_, default, units, description, **limits):
     """A parameter read by the time-stepping method only (never part of the seed)."""
-    return Parameter(name, type_, default, units, f"(ts only) {description}", affects_seed=False, **limits)
+    return Parameter(name, type_, default, units, f"(ts only) {description}", affects_seed=False,
+                     read_when=_reads_ts, **limits)
 
 
 PARAMETERS = (
@@ -61,9 +73,9 @@ PARAMETERS = (
               "of spacing 1, box length ceil(N^(1/d)), velocities uniform in [-1/2, 1/2]^d)",
               choices=(PAPER_INITIAL_CONDITION, SUPPLEMENTARY_INITIAL_CONDITION)),
     Parameter("radius", float, 0.2, LENGTH_UNITS, "sphere radius R", low=0.0, low_inclusive=False),
-    Parameter("mass", float, 1.0, "1", "sphere mass m", low=0.0, low_inclusive=False),
-    Parameter("speed", float, 1.0, f"{LENGTH_UNITS} {TIME_UNITS}-1", "initial speed |V| (eq. 4.3)",
-              low=0.0, low_inclusive=False),
+    Parameter("mass", float, 1.0, MASS_UNITS, "sphere mass m", low=0.0, low_inclusive=False),
+    Parameter("speed", float, 1.0, SPEED_UNITS, "initial speed |V| (eq. 4.3)",
+              low=0.0, low_inclusive=False, read_when=_reads_speed),
     Parameter("max_time", float, math.inf, TIME_UNITS, "stop at this time if several clusters remain",
               low=0.0, low_inclusive=False),
     Parameter("max_events", int, 10**10, "1",
@@ -126,9 +138,7 @@ STATISTICS = (
     Statistic("n_wall_reflections", "1", "number of cluster reflections at the box walls", dtype="int64"),
     Statistic("n_minimisations", "1", "DAHA minimisations run (ts; 0 for ed)", dtype="int64"),
     Statistic("n_minimiser_iterations", "1", "DAHA iterations summed over the run (ts; 0 for ed)", dtype="int64"),
-    Statistic("stop_reason", "1", "why the run stopped", dtype="int8",
-              attrs={"flag_values": np.arange(len(STOP_REASONS), dtype=np.int8),
-                     "flag_meanings": " ".join(STOP_REASONS)}),
+    Statistic("stop_reason", "1", "why the run stopped", dtype="int8", attrs=flag_attributes(STOP_REASONS)),
     # measured: it depends on how many ranks ran the task, not on the physics
     Statistic("rank_imbalance", "1", "largest over the time steps of max/mean work over the task's ranks "
               "(ts with --ranks-per-task > 1; 1 for ed and serial runs)", measured=True),
@@ -177,11 +187,13 @@ def _check_box_counting(params: dict) -> None:
 
 
 def coordinates(fixed: dict) -> dict[str, Coordinate]:
-    components = ("x", "y", "z")[: fixed["dimension"]]
+    components = COMPONENTS[: fixed["dimension"]]
     r_over_radius = pair_distribution_grid(1.0, fixed["pair_distribution_points"])
     levels = np.arange(1, fixed["box_levels"] + 1)
     return {
-        "component": Coordinate(np.array(components), "1", "Cartesian component"),
+        "component": Coordinate(np.arange(len(components), dtype=np.int8), "1",
+                                "Cartesian component (coded: flag_meanings names each flag_value)",
+                                attrs=flag_attributes(components)),
         "r": Coordinate(r_over_radius, "1", "pair distance r in units of the sphere radius R"),
         "box_size": Coordinate(2.0 ** -levels, "1", "box side relative to the box length, eps_m / L = 2^-m"),
     }

@@ -13,6 +13,7 @@ of the group wait.
 """
 
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -42,6 +43,28 @@ WARM_UP_PARTICLES = 4  # particles of the warm-up run, which compiles the kernel
 WARM_UP_PACKING_SAMPLES = 1000  # the fewest allowed
 PROFILE_TOP = 1.25  # the profile phi(z) covers 0 <= z <= PROFILE_TOP x filling height
 
+@dataclass(frozen=True)
+class _ReadWhen:
+    """A parameter is read by a task whose ``key`` takes one of ``values`` (e.g. a shape's size by
+    the shapes that have one); picklable, unlike a lambda, so the job travels between ranks."""
+
+    key: str
+    values: tuple
+
+    def __call__(self, params: dict) -> bool:
+        return params[self.key] in self.values
+
+
+_SIZED_SHAPES = _ReadWhen("shape", tuple(SIZE_KEYS))
+_CHAINS = _ReadWhen("shape", ("rod", "four_rods", "tripod"))
+_SMOOTH = _ReadWhen("shape", SMOOTH_SHAPES)
+_SUPERELLIPSOID = _ReadWhen("shape", ("superellipsoid",))
+_AGGLOMERATE = _ReadWhen("shape", ("agglomerate",))
+_BOXED = _ReadWhen("lateral", ("periodic", "walls"))
+_WALLED = _ReadWhen("lateral", ("walls",))
+_HEAP = _ReadWhen("lateral", ("none",))
+_SPREAD = _ReadWhen("size_distribution", ("uniform", "lognormal"))
+
 PARAMETERS = (
     Parameter("n_particles", int, REQUIRED, "1", "number of particles deposited", low=1),
     Parameter("shape", str, "sphere", "1",
@@ -52,42 +75,44 @@ PARAMETERS = (
               "polydisperse spheres, Fig. 1d-f); agglomerate (the spheres of agglomerate_file)",
               choices=SHAPES),
     Parameter("shape_size", int, 5, "1", "L of spiky and cube; spheres of a rod, of each arm of four_rods, "
-              "of each leg of a tripod", low=1),
+              "of each leg of a tripod", low=1, read_when=_SIZED_SHAPES),
     Parameter("shape_spacing", float, 1.0, "1", "centre distance of neighbouring spheres in rod, four_rods "
               "and tripod, in sphere radii (< 2: overlapping; 1 gives Fig. 1a)", low=0.0, high=2.0,
-              low_inclusive=False),
+              low_inclusive=False, read_when=_CHAINS),
     Parameter("semi_axis_x", float, 4.0, "1", "ellipsoid/superellipsoid semi-axis along x, in sphere_radius units",
-              low=0.0, low_inclusive=False),
-    Parameter("semi_axis_y", float, 3.0, "1", "semi-axis along y, in sphere_radius units", low=0.0, low_inclusive=False),
-    Parameter("semi_axis_z", float, 2.0, "1", "semi-axis along z, in sphere_radius units", low=0.0, low_inclusive=False),
+              low=0.0, low_inclusive=False, read_when=_SMOOTH),
+    Parameter("semi_axis_y", float, 3.0, "1", "semi-axis along y, in sphere_radius units", low=0.0,
+              low_inclusive=False, read_when=_SMOOTH),
+    Parameter("semi_axis_z", float, 2.0, "1", "semi-axis along z, in sphere_radius units", low=0.0,
+              low_inclusive=False, read_when=_SMOOTH),
     Parameter("exponent_vertical", float, 2.0, "1", "superellipsoid exponent e1 (north-south; 2: ellipsoid)",
-              low=1.0, high=20.0, low_inclusive=False),
+              low=1.0, high=20.0, low_inclusive=False, read_when=_SUPERELLIPSOID),
     Parameter("exponent_horizontal", float, 2.0, "1", "superellipsoid exponent e2 (east-west; 2: ellipsoid)",
-              low=1.0, high=20.0, low_inclusive=False),
+              low=1.0, high=20.0, low_inclusive=False, read_when=_SUPERELLIPSOID),
     Parameter("shape_spheres", int, 1785, "1", "number of spheres approximating an ellipsoid or superellipsoid "
-              "(Fig. 1d: 1785)", low=1),
+              "(Fig. 1d: 1785)", low=1, read_when=_SMOOTH),
     Parameter("agglomerate_file", str, "", "1", "CSV (x, y, z, r) or HDF5 (spheres/position, spheres/radius, e.g. "
               "an aggregation task file) holding the agglomerate; it is rescaled to mean radius sphere_radius",
-              is_file=True),
+              is_file=True, read_when=_AGGLOMERATE),
     Parameter("sphere_radius", float, 0.5, LENGTH_UNITS, "radius of the particles' spheres (the default 0.5 "
               "makes lengths count sphere diameters); shape lengths are in units of it",
               low=0.0, low_inclusive=False),
     Parameter("box_length", float, 50.0, LENGTH_UNITS, "side of the square bottom [0, box_length]^2 "
-              "(periodic or walled)", low=0.0, low_inclusive=False),
+              "(periodic or walled)", low=0.0, low_inclusive=False, read_when=_BOXED),
     Parameter("lateral", str, "periodic", "1", "lateral boundaries: periodic, walls (four rigid vertical walls, "
               "see wall_contact), none (a heap on an unbounded floor)", choices=tuple(LATERAL)),
     Parameter("wall_contact", str, "frictionless", "1", "wall contact model of lateral = walls: frictionless "
               "(a sphere of infinite radius: the wall pushes only along its normal and a touching sphere slides "
               "along it) or glued (the wall holds the touching sphere's centre: it pivots about it, no sliding)",
-              choices=tuple(WALL_CONTACTS), affects_seed=False),
+              choices=tuple(WALL_CONTACTS), affects_seed=False, read_when=_WALLED),
     Parameter("floor", str, "stop", "1", "floor z = 0: stop (the paper: a particle touching it is immobilised) "
               "or roll (the floor contact acts as a pivot and the particle keeps rolling)", choices=tuple(FLOOR)),
     Parameter("drop_radius", float, 5.0, LENGTH_UNITS, "with lateral = none: particles are released uniformly "
-              "over the disc of this radius around the origin", low=0.0, low_inclusive=False),
+              "over the disc of this radius around the origin", low=0.0, low_inclusive=False, read_when=_HEAP),
     Parameter("size_distribution", str, "monodisperse", "1", "particle size factor: monodisperse (1), uniform "
               "(in [1 - size_spread, 1 + size_spread]) or lognormal (exp(size_spread Z), Z standard normal)",
               choices=SIZE_DISTRIBUTIONS),
-    Parameter("size_spread", float, 0.1, "1", "width of the size distribution", low=0.0),
+    Parameter("size_spread", float, 0.1, "1", "width of the size distribution", low=0.0, read_when=_SPREAD),
     Parameter("trial_angle", float, 1e-2, "rad", "trial rotation Delta phi of frustrated situations (section 4.1)",
               low=0.0, high=np.pi, low_inclusive=False, high_inclusive=False),
     Parameter("cycle_n", int, 4, "1", "n of the cycling criterion (34), section 4.2 (0: off)", low=0, high=28),
