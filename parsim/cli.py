@@ -8,6 +8,9 @@
     parsim plot OUTPUT [--figure NAME] [--out PATH] [--task LABEL]
                                               the papers' figures from a job's outputs, PNG and PDF
                                               (default: every figure the dataset supports, in OUTPUT/figures)
+    parsim export OUTPUT [--task LABEL | --all] --format FORMAT [--out PATH]
+                                              a task's configuration for OVITO, ParaView, LAMMPS, YADE,
+                                              ASE or a CSV table (docs/export.md)
     parsim --version                          the installed version
 
 ``python -m parsim`` is the same command.
@@ -26,6 +29,7 @@ from pathlib import Path
 
 import parsim
 from parsim.errors import JobError, ParsimError, describe_exception
+from parsim.output.export import add_export_command, run_export
 
 EXIT_USER_ERROR = 2
 EXIT_RUN_FAILED = 1
@@ -62,11 +66,13 @@ def main(argv: list[str] | None = None) -> int:
     plot.add_argument("--task", metavar="LABEL",
                       help="the task the pictures show (sediment, cluster), e.g. p0003_r0001; default: the first")
 
+    add_export_command(commands)
+
     args = parser.parse_args(argv)
     if args.command == "run":
         return _run(args)
     try:
-        return {"validate": _validate, "info": _info, "plot": _plot}[args.command](args)
+        return {"validate": _validate, "info": _info, "plot": _plot, "export": run_export}[args.command](args)
     except ParsimError as error:
         print(f"parsim: error: {error}", file=sys.stderr)
         return EXIT_USER_ERROR
