@@ -135,7 +135,7 @@ def _warm_up(job: Job, pending: list[Task], announce: bool) -> None:
     if not rehearsals:
         return
     if announce:
-        print("parsim: preparing the kernels (compiled once per machine, about a minute; loaded from the cache "
+        print("parsim: preparing the kernels (compiled once per machine, up to a few minutes; loaded from the cache "
               "afterwards)...", file=sys.stderr, flush=True)
     start = time.perf_counter()
     for small in rehearsals.values():
