@@ -20,9 +20,12 @@ is computed; errors name the key and the allowed values.
 """
 
 import hashlib
+import json
 import math
 import os
+import re
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -159,6 +162,25 @@ class Job:
     def describe_point(self, point: int) -> str:
         params = self.point_parameters(point)
         return ", ".join(f"{name}={params[name]!r}" for name in self.sweep) or "the single point"
+
+    @classmethod
+    def from_dict(cls, document: Mapping[str, Any], *, solvers: dict[str, Solver] | None = None,
+                  source: str = "Job.from_dict", output: str | Path | None = None) -> "Job":
+        """A job from a dict laid out as a job file reads: top-level keys, ``"parameters"``, ``"sweep"``.
+
+        The dict is written as TOML and read back by :func:`parse_job`, so that it is validated
+        by the very code that validates job files, with the same messages (``source`` in front,
+        where a file has its path), and so that :attr:`text` is a job file: the output folder's
+        ``job.toml`` can be run, resumed and read by ``parsim run`` and ``parsim info`` as any other.
+        Python values a notebook holds are accepted as the TOML values they stand for: numpy
+        numbers, tuples and arrays (lists), paths (strings).  ``solvers`` defaults to
+        :data:`parsim.solvers.SOLVERS`; ``output`` overrides the folder, as in :func:`load_job`.
+        """
+        if solvers is None:
+            from parsim.solvers import SOLVERS  # here: the solvers import numba, which a Job alone does not need
+
+            solvers = SOLVERS
+        return parse_job(_toml_document(document, source), solvers, source=source, output=output)
 
 
 def load_job(path: str | Path, solvers: dict[str, Solver], output: str | Path | None = None) -> Job:
@@ -342,3 +364,64 @@ def _table(document: dict, key: str, fail) -> dict:
         fail(f"{key} must be a table [{key}], got {table!r}")
     return table
 
+
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _toml_document(document: Mapping[str, Any], source: str) -> str:
+    """``document`` as TOML text: its plain keys first, then each table as a ``[table]`` section.
+
+    TOML wants every plain key of the root before the first section; tables nested deeper
+    are inline tables.  A value TOML cannot hold is a :class:`JobError` naming its key.
+    """
+    if not isinstance(document, Mapping):
+        raise JobError(f"{source}: a job must be a dict of its keys (name, kind, seed, ...), got {document!r}")
+    plain = [f"{_toml_key(key, '', source)} = {_toml_value(value, key, source)}\n"
+             for key, value in document.items() if not isinstance(value, Mapping)]
+    tables = [f"\n[{_toml_key(key, '', source)}]\n" + "".join(
+        f"{_toml_key(name, key, source)} = {_toml_value(value, f'[{key}] {name}', source)}\n"
+        for name, value in table.items())
+        for key, table in document.items() if isinstance(table, Mapping)]
+    return "".join(plain + tables)
+
+
+def _toml_key(key: Any, table: str, source: str) -> str:
+    if not isinstance(key, str):
+        raise JobError(f"{source}: key {key!r}{f' in {table}' if table else ''}: keys must be strings")
+    return key if _BARE_KEY.fullmatch(key) else _toml_string(key)
+
+
+def _toml_value(value: Any, where: str, source: str) -> str:
+    """One TOML value; ``where`` (``[parameters] radius``) names it in an error."""
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, (int, np.integer)):
+        return _toml_integer(int(value))
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))  # shortest round trip; TOML spells inf and nan as Python does
+    if isinstance(value, (str, Path)):
+        return _toml_string(str(value))
+    if isinstance(value, Mapping):
+        return "{" + ", ".join(f"{_toml_key(k, where, source)} = {_toml_value(v, f'{where}.{k}', source)}"
+                               for k, v in value.items()) + "}"
+    if isinstance(value, (list, tuple, np.ndarray)):
+        items = value.tolist() if isinstance(value, np.ndarray) else value
+        return "[" + ", ".join(_toml_value(item, f"{where}[{i}]", source) for i, item in enumerate(items)) + "]"
+    if value is None:
+        raise JobError(f"{source}: {where} = None: a job file has no null; leave the key out for its default")
+    raise JobError(f"{source}: {where} = {value!r}: allowed: a string, an integer, a number, true or false, "
+                   "a list or a dict")
+
+
+def _toml_integer(value: int) -> str:
+    """An integer as TOML; one beyond the 64 bits of TOML is written as the first such integer,
+    which :func:`parse_job` refuses with the same message naming its key (Python cannot even
+    print integers of more than 4300 digits)."""
+    if not TOML_INTEGERS[0] <= value <= TOML_INTEGERS[1]:
+        return str(TOML_INTEGERS[1] + 1)
+    return str(value)
+
+
+def _toml_string(text: str) -> str:
+    """A TOML basic string: JSON's escapes are TOML's, and TOML also escapes DEL."""
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")

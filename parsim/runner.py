@@ -37,7 +37,9 @@ from parsim.output.snapshot import read_statistics, write_task_file
 from parsim.parallel.collective import on_root
 from parsim.parallel.scheduler import require_thread_multiple, run_group_tasks
 from parsim.progress import TaskProgress
+from parsim.solver import TaskResult
 from parsim.solvers import SOLVERS
+
 
 #: How long a rank other than 0 waits, after a signal, for rank 0 to end the job before it aborts it itself.
 SIGNAL_GRACE_SECONDS = 2.0
@@ -80,7 +82,7 @@ def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
 def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: threading.Lock, comm: MPI.Comm,
                  progress: bool, ranks_per_task: int) -> None:
     solver = SOLVERS[job.kind]
-    _warm_up(job, pending, progress)
+    warm_up(job, pending, progress)
     point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
     # Costliest first, so that the last tasks to start are short and no rank idles at the end; every
     # rank sorts alike (a stable sort of the same list), so a task index means the same task everywhere.
@@ -95,18 +97,11 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
                 return  # a serial solver runs on the group's rank 0; the others wait for the next task
             group = MPI.COMM_SELF
         task = pending[k]
-        params = job.point_parameters(task.point)
-        seed = job.seed_sequence(task, solver)
-        start = time.perf_counter()
-        result = solver.solve(params, np.random.default_rng(seed), group)
+        result = solve_task(job, task, group)
         if group.Get_rank() > 0:
             return
-        result.statistics["wall_time"] = time.perf_counter() - start
-        attrs = {**params, **job.input_attributes, **job.unit_attributes, "job_name": job.name,
-                 "job_seed": job.seed, "spawn_key": list(seed.spawn_key), "point": task.point,
-                 "realization": task.realization}
         with writing:
-            write_task_file(folder.task_path(task), result, attrs)
+            write_task_file(folder.task_path(task), result, task_attributes(job, task))
 
     def describe_failure(k: int, error: Exception) -> str:
         task = pending[k]
@@ -119,7 +114,25 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
     bar.close()
 
 
-def _warm_up(job: Job, pending: list[Task], announce: bool) -> None:
+def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult:
+    """Solve ``task`` of ``job`` on ``comm`` from its own random stream; its ``wall_time`` is the solve's."""
+    solver = SOLVERS[job.kind]
+    start = time.perf_counter()
+    result = solver.solve(job.point_parameters(task.point), np.random.default_rng(job.seed_sequence(task, solver)),
+                          comm)
+    result.statistics["wall_time"] = time.perf_counter() - start
+    return result
+
+
+def task_attributes(job: Job, task: Task) -> dict:
+    """The root attributes of ``task``'s file: its parameters, input files, units and origin."""
+    seed = job.seed_sequence(task, SOLVERS[job.kind])
+    return {**job.point_parameters(task.point), **job.input_attributes, **job.unit_attributes,
+            "job_name": job.name, "job_seed": job.seed, "spawn_key": list(seed.spawn_key), "point": task.point,
+            "realization": task.realization}
+
+
+def warm_up(job: Job, pending: list[Task], announce: bool) -> None:
     """Compile, or load from numba's cache, the kernels of the pending tasks before any task is timed.
 
     Each distinct small version of the pending points (:attr:`Solver.warm_up_parameters`)
