@@ -114,12 +114,17 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
     bar.close()
 
 
-def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult:
-    """Solve ``task`` of ``job`` on ``comm`` from its own random stream; its ``wall_time`` is the solve's."""
+def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult | None:
+    """Solve ``task`` of ``job`` on ``comm`` from its own random stream; its ``wall_time`` is the solve's.
+
+    A decomposed task's result lives on ``comm``'s rank 0; the other ranks get None.
+    """
     solver = SOLVERS[job.kind]
     start = time.perf_counter()
     result = solver.solve(job.point_parameters(task.point), np.random.default_rng(job.seed_sequence(task, solver)),
                           comm)
+    if comm.Get_rank() > 0:
+        return None
     result.statistics["wall_time"] = time.perf_counter() - start
     return result
 
