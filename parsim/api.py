@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 
 from parsim import job as job_files
-from parsim.errors import JobError, ParsimError
+from parsim.errors import JobError
 from parsim.job import UNIT_KEYS, Job, Task
 
 if TYPE_CHECKING:
@@ -100,20 +100,13 @@ def _on_every_rank(comm: MPI.Comm, work: Callable[[], T]) -> T:
     the other ranks waiting for ever: as ``parsim run`` does, the failing rank prints it and
     aborts the job, with the command line's exit status.
     """
-    from parsim.cli import EXIT_RUN_FAILED, EXIT_USER_ERROR
-    from parsim.errors import describe_exception
-    from parsim.parallel.collective import abort_job, raised_on_every_rank
+    from parsim.parallel.collective import abort_if_alone
 
     try:
         return work()
-    except ParsimError as error:
-        if comm.Get_size() > 1 and not raised_on_every_rank(error):
-            status = EXIT_USER_ERROR if isinstance(error, JobError) else EXIT_RUN_FAILED
-            abort_job(comm, f"{error} (on rank {comm.Get_rank()})", status)
-        raise
     except Exception as error:
-        if comm.Get_size() > 1:
-            abort_job(comm, f"rank {comm.Get_rank()} failed: {describe_exception(error)}", EXIT_RUN_FAILED)
+        if comm.Get_size() > 1:  # a single process raises: a notebook's kernel lives on
+            abort_if_alone(comm, error)
         raise
 
 

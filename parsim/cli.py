@@ -28,11 +28,8 @@ import sys
 from pathlib import Path
 
 import parsim
-from parsim.errors import JobError, ParsimError, describe_exception
+from parsim.errors import EXIT_RUN_FAILED, EXIT_USER_ERROR, ParsimError, exit_status
 from parsim.output.export import add_export_command, run_export
-
-EXIT_USER_ERROR = 2
-EXIT_RUN_FAILED = 1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -88,7 +85,7 @@ def _run(args) -> int:
     from mpi4py import MPI
 
     from parsim.job import load_job
-    from parsim.parallel.collective import FailedOnRoot, abort_job, on_root, raised_on_every_rank
+    from parsim.parallel.collective import FailedOnRoot, abort_if_alone, on_root
     from parsim.parallel.launcher import launcher_mismatch, speaks_for_all
     from parsim.runner import run_job
     from parsim.solvers import SOLVERS
@@ -109,16 +106,14 @@ def _run(args) -> int:
             print("\nparsim: interrupted before any task started", file=sys.stderr)
         return 128 + signal.SIGINT
     except ParsimError as error:
-        status = EXIT_USER_ERROR if isinstance(error, JobError) else EXIT_RUN_FAILED
-        if not raised_on_every_rank(error):  # e.g. a file that this rank alone cannot read
-            abort_job(comm, f"{error} (on rank {comm.Get_rank()})", status)
+        abort_if_alone(comm, error)  # e.g. a file that this rank alone cannot read
         if comm.Get_rank() == 0:
             print(f"parsim: error: {error}", file=sys.stderr)
-        return status
+        return exit_status(error)
     except Exception as error:  # noqa: BLE001 - one rank's failure must not leave the others waiting
         if comm.Get_size() == 1:
             raise
-        abort_job(comm, f"rank {comm.Get_rank()} failed: {describe_exception(error)}", EXIT_RUN_FAILED)
+        abort_if_alone(comm, error)
     if comm.Get_rank() == 0:
         print(f"dataset: {path}")
     return 0

@@ -18,6 +18,12 @@ import traceback
 from pathlib import Path
 
 
+#: Exit status of a job that cannot run as written (checked before anything is computed).
+EXIT_USER_ERROR = 2
+#: Exit status of a failure while a job runs (a task, a full disk).
+EXIT_RUN_FAILED = 1
+
+
 class ParsimError(Exception):
     """Base of the errors parsim raises on purpose."""
 
@@ -52,3 +58,8 @@ def describe_exception(error: BaseException) -> str:
     if isinstance(error, ParsimError):
         return str(error)
     return "".join(traceback.format_exception(error)).rstrip()
+
+
+def exit_status(error: Exception) -> int:
+    """The command line's exit status for ``error``: a job that cannot run, or a failed run."""
+    return EXIT_USER_ERROR if isinstance(error, JobError) else EXIT_RUN_FAILED

@@ -17,7 +17,7 @@ from typing import Callable, TypeVar
 import numpy as np
 from mpi4py import MPI
 
-from parsim.errors import ParsimError
+from parsim.errors import ParsimError, describe_exception, exit_status
 
 POLL_SECONDS = 1e-3
 #: Pause between printing a failure and MPI_Abort: without it mpiexec lost the message in 1 of 8 runs.
@@ -90,6 +90,17 @@ def abort_job(comm: MPI.Comm, message: str, status: int = 1) -> None:
         time.sleep(ABORT_GRACE_SECONDS)  # let mpiexec forward the message before MPI_Abort ends the ranks
     finally:
         comm.Abort(status)  # even if the message could not be printed (a closed pipe)
+
+
+def abort_if_alone(comm: MPI.Comm, error: Exception) -> None:
+    """End every rank when ``error`` was raised on this rank alone: the others would wait for it
+    for ever.  An error every rank raised alike (through :func:`on_root`) returns, to be reported
+    once by rank 0."""
+    if isinstance(error, ParsimError):
+        if not raised_on_every_rank(error):
+            abort_job(comm, f"{error} (on rank {comm.Get_rank()})", exit_status(error))
+    else:
+        abort_job(comm, f"rank {comm.Get_rank()} failed: {describe_exception(error)}", exit_status(error))
 
 
 class FailureReport:
