@@ -10,7 +10,7 @@ looking for overlaps.  Plain numpy.
 * no two spheres of different particles overlap by more than ``overlap_tol * ell``;
 * no sphere is below the floor (or through a wall) by more than that;
 * every particle ``p`` is at rest at a local minimum with respect to the sediment it was
-  deposited on (the particles ``< p``, the floor and the walls): a vertical fall, the
+  deposited on (the substrate, the particles ``< p``, the floor and the walls): a vertical fall, the
   steepest-descent rotation about each contact, and the rotation about the axis through
   each pair of contacts (both senses) must each either not lower the centre of mass or
   be blocked, i.e. create an overlap larger than ``block_tol * ell`` for one of the trial
@@ -26,6 +26,12 @@ is the touching sphere's own centre.  A frictionless wall is a sphere of infinit
 its pivot lies at infinity behind the wall, so it adds no rotation of its own (rolling on it
 alone is the fall), and with another pivot ``P`` it makes the rotation about the axis through
 ``P`` along the wall's normal.
+
+A cylinder ``(cx, cy, R, n)`` is the regular polygon of ``n`` frictionless planar walls inscribed
+in the circle of radius ``R`` about ``(cx, cy)``, side ``k`` facing the direction
+``2 pi k / n`` (the engine's model); its spheres must also have their centres within ``R - r``
+of the axis.  A substrate is a set of fixed spheres below the first particle: obstacles like
+the deposited spheres, which may overlap each other and the floor.
 """
 
 import numpy as np
@@ -91,26 +97,40 @@ def close_pairs(pos, rad, lateral, box_lower, box_upper, extra):
     return pairs, np.concatenate(out_d)
 
 
-#: Inward normals of the walls, in the order of the columns 1-4 of :func:`_plane_gaps`.
-WALL_NORMALS = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+def lateral_walls(lateral, box_lower, box_upper, cylinder=None):
+    """Inward unit normals ``N`` (k, 3) and levels ``c`` (k,) of the lateral walls: a sphere
+    of radius ``r`` centred at ``x`` is inside when ``N . x - r >= c``.  The four box faces,
+    or the sides of a cylinder's polygon, or none."""
+    if lateral != LATERAL_WALLS:
+        return np.zeros((0, 3)), np.zeros(0)
+    if cylinder is None:
+        normals = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+        levels = np.array([box_lower[0], -box_upper[0], box_lower[1], -box_upper[1]])
+        return normals, levels
+    cx, cy, radius, n = cylinder
+    theta = 2.0 * np.pi * np.arange(n) / n
+    outward = np.stack([np.cos(theta), np.sin(theta), np.zeros(n)], axis=1)
+    return -outward, -(outward[:, 0] * cx + outward[:, 1] * cy + radius * np.cos(np.pi / n))
 
 
-def _plane_gaps(x, r, lateral, box_lower, box_upper):
-    """Gaps to the floor (column 0) and, for walls, to the four walls (n, 1 or 5)."""
-    g = [x[:, 2] - r]
-    if lateral == LATERAL_WALLS:
-        g += [x[:, 0] - r - box_lower[0], box_upper[0] - x[:, 0] - r,
-              x[:, 1] - r - box_lower[1], box_upper[1] - x[:, 1] - r]
-    return np.stack(g, axis=1)
+def _plane_gaps(x, r, walls):
+    """Gaps to the floor (column 0) and to the lateral walls (columns 1...)."""
+    normals, levels = walls
+    return np.concatenate([(x[:, 2] - r)[:, None], x @ normals.T - r[:, None] - levels[None, :]], axis=1)
 
 
 def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_xy,
                    box_upper_xy, lateral, floor, wall_contact="frictionless", overlap_tol=1e-9, contact_tol=1e-7,
-                   deltas=(1e-7, 1e-6, 1e-5, 1e-4), block_tol=1e-12, max_report=20):
+                   deltas=(1e-7, 1e-6, 1e-5, 1e-4), block_tol=1e-12, max_report=20, cylinder=None,
+                   substrate=None):
     """Problems found in a sediment (see the module docs); an empty list means valid.
-    ``wall_contact`` is the wall contact model, "frictionless" or "glued"."""
+    ``wall_contact`` is the wall contact model, "frictionless" or "glued"; ``cylinder``
+    ``(cx, cy, R, n_sides)`` replaces the box walls by the cylinder's polygon (LATERAL_WALLS);
+    ``substrate`` ``(positions, radii)`` are fixed spheres below the first particle."""
     if wall_contact not in ("frictionless", "glued"):
         raise ValueError(f"wall_contact must be 'frictionless' or 'glued', got {wall_contact!r}")
+    if cylinder is not None and lateral != LATERAL_WALLS:
+        raise ValueError("a cylinder needs lateral = LATERAL_WALLS")
     pos = np.asarray(positions, float)
     rad = np.asarray(radii, float)
     part = np.asarray(particle, np.int64)
@@ -119,35 +139,48 @@ def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_
     hi = np.asarray(box_upper_xy, float)
     box = hi - lo
     ell = rad.mean()
+    walls = lateral_walls(lateral, lo, hi, cylinder)
+    sub_pos, sub_rad = (np.zeros((0, 3)), np.zeros(0)) if substrate is None else \
+        (np.asarray(substrate[0], float).reshape(-1, 3), np.asarray(substrate[1], float))
+    n_sub = len(sub_rad)
     problems = []
 
-    # 1. overlaps between particles, floor, walls
-    pairs, dist = close_pairs(pos, rad, lateral, lo, hi, 0.0)
+    # 1. overlaps between particles (the substrate is particle -1), floor, walls
+    all_pos = np.concatenate([sub_pos, pos])
+    all_rad = np.concatenate([sub_rad, rad])
+    all_part = np.concatenate([np.full(n_sub, -1), part])
+    pairs, dist = close_pairs(all_pos, all_rad, lateral, lo, hi, 0.0)
     if len(pairs):
-        diff = part[pairs[:, 0]] != part[pairs[:, 1]]
-        ov = rad[pairs[:, 0]] + rad[pairs[:, 1]] - dist
+        diff = all_part[pairs[:, 0]] != all_part[pairs[:, 1]]
+        ov = all_rad[pairs[:, 0]] + all_rad[pairs[:, 1]] - dist
         bad = diff & (ov > overlap_tol * ell)
-        for (i, j), o in list(zip(pairs[bad], ov[bad]))[:max_report]:
-            problems.append(f"spheres {i} (particle {part[i]}) and {j} (particle {part[j]}) "
-                            f"overlap by {o / ell:.3g} ell")
-    pg = _plane_gaps(pos, rad, lateral, lo, hi)
+        for (i, j), o in list(zip(pairs[bad] - n_sub, ov[bad]))[:max_report]:
+            problems.append(f"spheres {i} (particle {all_part[i + n_sub]}) and {j} (particle "
+                            f"{all_part[j + n_sub]}) overlap by {o / ell:.3g} ell (negative: substrate)")
+    pg = _plane_gaps(pos, rad, walls)
     for i in np.nonzero(pg.min(1) < -overlap_tol * ell)[0][:max_report]:
         problems.append(f"sphere {i} (particle {part[i]}) crosses the floor or a wall by "
                         f"{-pg[i].min() / ell:.3g} ell")
+    if cylinder is not None:
+        cx, cy, radius, _ = cylinder
+        beyond = np.hypot(pos[:, 0] - cx, pos[:, 1] - cy) - (radius - rad)
+        for i in np.nonzero(beyond > overlap_tol * ell)[0][:max_report]:
+            problems.append(f"sphere {i} (particle {part[i]}) has its centre {beyond[i] / ell:.3g} ell "
+                            f"beyond R - r from the cylinder's axis")
 
     # 2. rest at a local minimum, particle by particle, on the sediment below it
     starts = np.searchsorted(part, np.arange(len(com_all) + 1))
     ext = np.array([np.max(np.linalg.norm(pos[starts[p]:starts[p + 1]] - com_all[p], axis=1)
                            + rad[starts[p]:starts[p + 1]]) for p in range(len(com_all))])
-    rmax = rad.max()
+    rmax = all_rad.max()
     n_reported = 0
     for p in range(len(com_all)):
         a = pos[starts[p]:starts[p + 1]]
         ra = rad[starts[p]:starts[p + 1]]
         com = com_all[p]
-        # sediment of earlier particles near this one, as minimum images about its com
-        sed = pos[:starts[p]]
-        rs = rad[:starts[p]]
+        # sediment of earlier particles and substrate near this one, as minimum images about its com
+        sed = all_pos[:n_sub + starts[p]]
+        rs = all_rad[:n_sub + starts[p]]
         d = _min_image(sed - com, lateral, box)
         near = np.linalg.norm(d, axis=1) < ext[p] + rmax + 1e-3 * ell
         s_pos = com + d[near]
@@ -160,7 +193,7 @@ def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_
                 gp = dd - ra[:, None] - s_rad[None, :]
             else:
                 gp = np.zeros((len(x), 0))
-            return gp, _plane_gaps(x, ra, lateral, lo, hi)
+            return gp, _plane_gaps(x, ra, walls)
 
         g0, pg0 = gaps(a)
         # contacts from positions: (pivot, kind)
@@ -173,7 +206,7 @@ def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_
         sliding = []  # normals of frictionless wall contacts (pivots at infinity)
         for i, k in zip(pi, pk):
             if k > 0 and wall_contact == "frictionless":
-                sliding.append(WALL_NORMALS[k - 1])
+                sliding.append(walls[0][k - 1])
             else:
                 pivots.append(a[i].copy())
         n_contacts = len(pivots) + len(sliding)

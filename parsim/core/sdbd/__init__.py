@@ -13,8 +13,9 @@ steepest-descent choice), :mod:`.fall` (falling, 3.1), :mod:`.rolling` (rotation
 two contacts, 3.2-3.3), :mod:`.frustration` (the trial rotation, 4.1), :mod:`.cycling`
 (criterion 34 and the creep test, 4.2), :mod:`.ties` (simultaneous events, 4.3); below
 them :mod:`.events` (event solvers), :mod:`.rotation` (eq. 15, eqs. 13-14),
-:mod:`.contacts` (contact lists), :mod:`.grid` (sediment grid), :mod:`.overlap` (debug
-overlap measurement), :mod:`.bundles` (the named bundles of arrays) and :mod:`.constants`.
+:mod:`.contacts` (contact lists), :mod:`.grid` (sediment grid), :mod:`.polygon` (the
+cylindrical container), :mod:`.overlap` (debug overlap measurement), :mod:`.bundles` (the
+named bundles of arrays) and :mod:`.constants`.
 
 The public entry point is :func:`deposit`.
 
@@ -50,6 +51,31 @@ Where this implementation departs from, or makes precise, the printed paper:
   (``WALL_GLUED``), in which a wall, like the floor under FLOOR_ROLL, holds the touching
   sphere's centre as a pivot, is kept by name; see :mod:`.engine`.
 
+Containers (LATERAL_WALLS).  The box (``CONTAINER_BOX``) has four planar walls.  A cylinder
+(``CONTAINER_CYLINDER``, ``cylinder = (cx, cy, R, n_sides)``) is modelled as the regular polygon
+of ``n_sides`` planar walls inscribed in the circle of radius ``R`` about the vertical axis through
+``(cx, cy)``, side ``k`` with the inward normal ``-(cos theta_k, sin theta_k, 0)``,
+``theta_k = 2 pi k / n_sides``, at the apothem ``R cos(pi / n_sides)`` from the axis
+(:mod:`.polygon`).  Why not the curved wall itself: the paper's motions are rotations about
+fixed axes, and for a frictionless curved wall none keeps a touching sphere on the surface (the
+only circles on a cylinder are the horizontal ones about its axis, along which the centre of
+mass does not descend), so the event-driven motions of the paper do not exist there.  Each side
+is a wall as above (frictionless or glued); two adjacent sides have a vertical ``N1 x N2``, and
+the only motion that keeps both is the fall, as in a corner of the box.  Every sphere centre
+lies in the polygon shrunk by its radius ``r``, whose vertices are ``R - r / cos(pi / n_sides)
+<= R - r`` from the axis.  Only the sides within reach of a sphere are examined, so the cost per
+sphere does not grow with ``n_sides``.
+
+Substrate.  ``substrate_positions`` / ``substrate_radii`` are fixed spheres laid in the sediment
+before the first particle (sediment spheres ``0 .. m - 1``, wrapped into a periodic box): the
+particles drop above them and rest on them like on any sediment sphere; the grid's first cell
+is at least their largest diameter.  They are not part of the result.  The engine is
+prefix-independent (the first ``k`` particles of a run are those of a ``k``-particle run: the
+length scale is that of the shapes, and the grid's cell, the drop heights and the sediment
+indices depend only on the particles before), so depositing ``n1`` particles and then ``n2``
+more on the first sediment as substrate gives, bitwise, the sediment of one run of ``n1 + n2``
+particles.
+
 The numba cache of every kernel is stamped with all of :mod:`parsim.core`'s sources (see
 :mod:`parsim.core.cache`): editing :mod:`.decision`, :mod:`.events`, :mod:`.grid` or
 :mod:`.rotation` recompiles :func:`engine.run_deposition`.
@@ -60,6 +86,8 @@ from typing import NamedTuple
 import numpy as np
 
 from parsim.core.sdbd.constants import (
+    CONTAINER_BOX,
+    CONTAINER_CYLINDER,
     EVENT_KINDS,
     EVENT_LIMIT,
     FLOOR_ROLL,
@@ -69,6 +97,7 @@ from parsim.core.sdbd.constants import (
     LATERAL_NONE,
     LATERAL_PERIODIC,
     LATERAL_WALLS,
+    MIN_CYLINDER_SIDES,
     N_EVENT_KINDS,
     RESTING_ON_FLOOR,
     RESTING_THREE_CONTACTS,
@@ -88,6 +117,9 @@ __all__ = [
     "LATERAL_PERIODIC",
     "LATERAL_WALLS",
     "LATERAL_NONE",
+    "CONTAINER_BOX",
+    "CONTAINER_CYLINDER",
+    "MIN_CYLINDER_SIDES",
     "FLOOR_STOP",
     "FLOOR_ROLL",
     "RESTING_THREE_CONTACTS",
@@ -101,7 +133,8 @@ __all__ = [
 class DepositionResult(NamedTuple):
     """Outcome of :func:`deposit` (only the particles deposited before ``stopped_at``).
 
-    positions      (n, 3) sphere centres of the sediment
+    positions      (n, 3) sphere centres of the deposited particles (the substrate's spheres
+                   are not included)
     radii          (n,)
     particle       (n,) int64 particle of each sphere (contiguous, deposition order)
     center_of_mass (P, 3)
@@ -137,7 +170,8 @@ class DepositionResult(NamedTuple):
 def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
             particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
             trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
-            clock_from_particle=-1, wall_contact=WALL_FRICTIONLESS):
+            clock_from_particle=-1, wall_contact=WALL_FRICTIONLESS, container=CONTAINER_BOX, cylinder=None,
+            substrate_positions=None, substrate_radii=None):
     """Deposit particles one after the other by steepest descent; see the module docs.
 
     Parameters
@@ -177,12 +211,29 @@ def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_sc
         Wall contact model of LATERAL_WALLS: WALL_FRICTIONLESS (a sphere of infinite radius,
         the touching sphere slides along the wall) or WALL_GLUED (the wall holds the touching
         sphere's centre).
+    container : int
+        The lateral walls of LATERAL_WALLS: CONTAINER_BOX (the four faces of the box) or
+        CONTAINER_CYLINDER (a vertical cylinder, ``cylinder``).
+    cylinder : (cx, cy, radius, n_sides)
+        With CONTAINER_CYLINDER (and only then): the cylinder of ``radius`` about the vertical
+        axis through ``(cx, cy)``, modelled as the regular polygon of ``n_sides``
+        (``>= MIN_CYLINDER_SIDES``) planar walls inscribed in its circle, side ``k`` facing the
+        direction ``2 pi k / n_sides`` from the x axis (see the module docs).  ``radius`` must
+        exceed the largest sphere radius, ``lateral`` must be LATERAL_WALLS and the box must be
+        the square ``[cx - radius, cx + radius] x [cy - radius, cy + radius]``; every particle
+        must start inside the polygon.
+    substrate_positions, substrate_radii : (m, 3), (m,) float
+        Fixed spheres in the sediment before the first particle (default: none): obstacles
+        like the deposited spheres, never moving.  Centres at ``z >= 0``; with walls each
+        sphere lies inside the box or the cylinder's polygon; a periodic box wraps them.
+        They are not part of the result.
     """
     return deposit_with_diagnostics(
         shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
         particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
         trial_angle, cycle_n, cycle_eps, max_events_per_particle,
-        clock_from_particle=clock_from_particle, wall_contact=wall_contact)[0]
+        clock_from_particle=clock_from_particle, wall_contact=wall_contact, container=container,
+        cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii)[0]
 
 
 def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_shape,
@@ -190,7 +241,8 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
                              box_upper_xy, lateral, floor, trial_angle=1e-2, cycle_n=4,
                              cycle_eps=1e-3, max_events_per_particle=100_000, clock_from_particle=-1,
                              wall_contact=WALL_FRICTIONLESS, check_overlaps=False,
-                             trace_particle=-1, trace_steps=0):
+                             trace_particle=-1, trace_steps=0, container=CONTAINER_BOX, cylinder=None,
+                             substrate_positions=None, substrate_radii=None):
     """:func:`deposit` plus a dict of diagnostics, for tests and benchmarks.
 
     With ``check_overlaps`` the kernel measures, after every move, the largest overlap of
@@ -275,13 +327,17 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
             raise ValueError("box_lower_xy and box_upper_xy must be finite pairs (x, y)")
         if np.any(hi <= lo):
             raise ValueError("box_upper_xy must exceed box_lower_xy in x and y")
+    sub_pos, sub_rad = _substrate(substrate_positions, substrate_radii)
+    r_sub = float(np.max(sub_rad)) if len(sub_rad) else 0.0
+    polygon, n_sides, lo, hi = _cylinder(container, cylinder, lateral, lo, hi, max(r_max, r_sub))
     if lateral == LATERAL_PERIODIC:
         side = np.min(hi - lo)
-        need = max(2.0 * ext_max, 4.0 * r_max)
+        r_contact = max(r_max, r_sub)
+        need = max(2.0 * ext_max, 4.0 * r_contact)
         if side <= need:
             raise ValueError(
                 f"periodic box side {side:g} must exceed twice the largest particle extent "
-                f"(2 x {ext_max:g}) and four times the largest sphere radius (4 x {r_max:g}), "
+                f"(2 x {ext_max:g}) and four times the largest sphere radius (4 x {r_contact:g}), "
                 f"i.e. {need:g}, so that minimum images are unambiguous")
     if lateral == LATERAL_WALLS and P:
         # the caller guarantees that each particle starts inside; check it
@@ -293,16 +349,24 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
             quat_to_matrix(prot[p], matrix)
             xy = pxy[p] + o @ matrix[:2, :].T
             tol = 1e-9 * ell
-            if np.any(xy - r[:, None] < lo - tol) or np.any(xy + r[:, None] > hi + tol):
+            if polygon is not None:
+                outside = np.any(_outside_polygon(xy, r, polygon, n_sides, tol))
+            else:
+                outside = np.any(xy - r[:, None] < lo - tol) or np.any(xy + r[:, None] > hi + tol)
+            if outside:
                 raise ValueError(f"particle {p}: dropped at {tuple(pxy[p])}, it does not fit inside the walls")
         if np.any(hi - lo < 2.0 * r_max):
             raise ValueError("walled box narrower than the largest sphere")
+    if lateral == LATERAL_WALLS:
+        _check_substrate_inside(sub_pos, sub_rad, lo, hi, polygon, n_sides, 1e-9 * ell)
     if lateral == LATERAL_NONE:
         lo = np.zeros(2)
         hi = np.zeros(2)
 
+    # the cell bounds every sediment radius: the first particle's and the substrate's
     cell = 2.0 * pscale[0] * shape_rmax[pshape[0]] if P else 2.0 * r_max
-    g = grid.grid_new(lateral, lo, hi, cell, n_total)
+    cell = max(cell, 2.0 * r_sub)
+    g = grid.grid_new(lateral, lo, hi, cell, n_total + len(sub_rad), polygon, n_sides)
     out_pos = np.zeros((n_total, 3))
     out_rad = np.zeros(n_total)
     out_particle = np.zeros(n_total, dtype=np.int64)
@@ -315,7 +379,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     diag = np.full(4, np.nan)
     trace = np.full((max(int(trace_steps), 1), 16), np.nan)
     stopped_at, n_written = engine.run_deposition(
-        offsets, radii, start, pshape, pscale, prot, pxy, *g, int(floor), int(wall_contact), float(trial_angle),
+        offsets, radii, start, pshape, pscale, prot, pxy, sub_pos, sub_rad, *g, int(floor), int(wall_contact), float(trial_angle),
         int(cycle_n), float(cycle_eps), int(max_events_per_particle), ell,
         bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), out_pos, out_rad,
         out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag)
@@ -335,3 +399,83 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     ), {"max_overlap": float(diag[0]), "steps": int(diag[1]), "chunk_steps": int(diag[2]),
         "length_scale": ell, "trace": trace}
 
+
+
+def _substrate(substrate_positions, substrate_radii):
+    """The substrate's centres (m, 3) and radii (m,) (m = 0 when none is given), validated."""
+    if substrate_positions is None and substrate_radii is None:
+        return np.zeros((0, 3)), np.zeros(0)
+    if substrate_positions is None or substrate_radii is None:
+        raise ValueError("substrate_positions and substrate_radii must be given together")
+    pos = np.ascontiguousarray(substrate_positions, dtype=np.float64)
+    rad = np.ascontiguousarray(substrate_radii, dtype=np.float64)
+    if pos.ndim != 2 or pos.shape[1] != 3 or rad.shape != (pos.shape[0],):
+        raise ValueError(f"substrate_positions must have shape (m, 3) and substrate_radii (m,), "
+                         f"got {pos.shape} and {rad.shape}")
+    for j in range(len(rad)):
+        if not (np.all(np.isfinite(pos[j])) and np.isfinite(rad[j]) and rad[j] > 0 and pos[j, 2] >= 0):
+            raise ValueError(f"substrate sphere {j}: centre {tuple(pos[j])}, radius {rad[j]}: the centre "
+                             f"must be finite with z >= 0 and the radius finite and > 0")
+    return pos, rad
+
+
+def _cylinder(container, cylinder, lateral, lo, hi, r_max):
+    """The polygon of a cylindrical container (:func:`.polygon.polygon_geometry`), its number
+    of sides and the box (the square about the cylinder), validated against the other
+    arguments; ``(None, 0, lo, hi)`` for the box."""
+    from parsim.core.sdbd.polygon import polygon_geometry
+
+    if container not in (CONTAINER_BOX, CONTAINER_CYLINDER):
+        raise ValueError(f"container must be CONTAINER_BOX (0) or CONTAINER_CYLINDER (1), got {container}")
+    if container == CONTAINER_BOX:
+        if cylinder is not None:
+            raise ValueError("cylinder is given but container is CONTAINER_BOX")
+        return None, 0, lo, hi
+    if lateral != LATERAL_WALLS:
+        raise ValueError(f"a cylindrical container needs lateral = LATERAL_WALLS (1), got {lateral}")
+    if cylinder is None or len(cylinder) != 4:
+        raise ValueError("CONTAINER_CYLINDER needs cylinder = (cx, cy, radius, n_sides)")
+    cx, cy, radius, n_sides = cylinder
+    cx, cy, radius = float(cx), float(cy), float(radius)
+    if not (np.isfinite(cx) and np.isfinite(cy) and np.isfinite(radius)):
+        raise ValueError(f"cylinder centre and radius must be finite, got {cylinder}")
+    if int(n_sides) != n_sides or n_sides < MIN_CYLINDER_SIDES:
+        raise ValueError(f"cylinder n_sides must be an integer >= {MIN_CYLINDER_SIDES}, got {n_sides}")
+    if not radius > r_max:
+        raise ValueError(f"cylinder radius {radius:g} must exceed the largest sphere radius {r_max:g}")
+    square_lo = np.array([cx - radius, cy - radius])
+    square_hi = np.array([cx + radius, cy + radius])
+    tol = 1e-12 * (radius + abs(cx) + abs(cy))
+    if np.any(np.abs(lo - square_lo) > tol) or np.any(np.abs(hi - square_hi) > tol):
+        raise ValueError(f"with a cylinder the box must be the square [cx - radius, cx + radius] x "
+                         f"[cy - radius, cy + radius] = {tuple(square_lo)} - {tuple(square_hi)}, "
+                         f"got {tuple(lo)} - {tuple(hi)}")
+    return polygon_geometry(cx, cy, radius, int(n_sides)), int(n_sides), square_lo, square_hi
+
+
+def _outside_polygon(xy, r, polygon, n_sides, tol):
+    """Which spheres (centres ``xy`` (k, 2), radii ``r``) cross a side of the polygon by more
+    than ``tol``.  A point's farthest side is the one whose normal is nearest its direction
+    from the axis; that side and its neighbours are tested."""
+    table = polygon[3:].reshape(n_sides, 3)
+    angle = np.arctan2(xy[:, 1] - polygon[1], xy[:, 0] - polygon[0])
+    nearest = np.rint(angle * n_sides / (2.0 * np.pi)).astype(np.int64)
+    outside = np.zeros(len(r), dtype=bool)
+    for shift in (-1, 0, 1):
+        ux, uy, d = table[(nearest + shift) % n_sides].T
+        outside |= ux * xy[:, 0] + uy * xy[:, 1] + r - d > tol
+    return outside
+
+
+def _check_substrate_inside(pos, rad, lo, hi, polygon, n_sides, tol):
+    """Every substrate sphere lies inside the walls (the box or the cylinder's polygon)."""
+    if len(rad) == 0:
+        return
+    if polygon is not None:
+        outside = _outside_polygon(pos[:, :2], rad, polygon, n_sides, tol)
+    else:
+        outside = np.any((pos[:, :2] - rad[:, None] < lo - tol) | (pos[:, :2] + rad[:, None] > hi + tol), axis=1)
+    if np.any(outside):
+        j = int(np.argmax(outside))
+        raise ValueError(f"substrate sphere {j}: centre {tuple(pos[j])}, radius {rad[j]}: it does not lie "
+                         f"inside the walls")

@@ -104,7 +104,8 @@ Grid = bundle("Grid", ["geom", "igeom", "head", "col_top", "nxt", "hkeys", "hval
 #: The parameters of a run: floor mode (``FLOOR_*``), trial angle of 4.1 (0: off), the
 #: virtual small rotation of eq. 31, criterion (34)'s ``cycle_n`` and ``cycle_eps``, the
 #: largest number of steps of a particle, the length scale ``ell`` of the tolerances,
-#: whether the box has walls and whether they are frictionless (``WALL_FRICTIONLESS``),
+#: whether the container has lateral walls (the box's faces or the cylinder's sides)
+#: and whether they are frictionless (``WALL_FRICTIONLESS``),
 #: whether every move is checked for overlaps.
 Settings = namedtuple("Settings", ["floor_mode", "trial_angle", "virtual_angle", "cycle_n", "cycle_eps",
                                    "max_events", "ell", "walls", "sliding_walls", "debug"])

@@ -15,6 +15,14 @@ LATERAL_WALLS = 1
 #: No lateral boundary: a heap on an unbounded floor.
 LATERAL_NONE = 2
 
+#: The lateral walls of LATERAL_WALLS are the four faces of the box.
+CONTAINER_BOX = 0
+#: The lateral wall of LATERAL_WALLS is a cylinder, modelled as the regular polygon of planar
+#: walls inscribed in its circle (see :mod:`parsim.core.sdbd`).
+CONTAINER_CYLINDER = 1
+#: Fewest sides of the polygon that models a cylinder.
+MIN_CYLINDER_SIDES = 8
+
 #: A wall contact is a sphere of infinite radius (the default): the wall pushes only along its
 #: normal, its pivot lies at infinity behind it, so the wall never holds a particle up by
 #: itself, and with one other pivot ``P`` the particle rotates about the axis through ``P``
@@ -91,6 +99,9 @@ OB_WALL_XLO = 2
 OB_WALL_XHI = 3
 OB_WALL_YLO = 4
 OB_WALL_YHI = 5
+#: A side of the polygon that models a cylinder; the contact's ``sediment`` field holds the
+#: side's index.  Like the box walls it is a plane with a horizontal normal (``>= OB_WALL_XLO``).
+OB_SIDE = 6
 
 # Motions chosen by the steepest-descent decision.
 MOTION_FALL = 0

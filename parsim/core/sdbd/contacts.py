@@ -1,9 +1,10 @@
 """Contacts of the moving particle, kept as parallel arrays (one row per contact).
 
 A contact is ``(i, ob, j, sh)``: moving sphere ``i`` touches an obstacle of kind ``ob``
-(``OB_SPHERE``, ``OB_FLOOR``, ``OB_WALL_*``); for a sphere obstacle ``j`` is the sediment
-sphere and ``sh`` (row of 3, ``sh[2] = 0``) the periodic image shift that brings
-``sed[j]`` next to the particle; planes have ``j = -1`` and ``sh = 0``.  A list is a
+(``OB_SPHERE``, ``OB_FLOOR``, ``OB_WALL_*``, ``OB_SIDE``); for a sphere obstacle ``j`` is the
+sediment sphere and ``sh`` (row of 3, ``sh[2] = 0``) the periodic image shift that brings
+``sed[j]`` next to the particle; a side of the cylinder's polygon has its index in ``j``, the
+other planes ``j = -1``; planes have ``sh = 0``.  A list is a
 :class:`.bundles.ContactList` with its number of rows beside it.  The engine keeps three
 such lists: the contacts, the pivots of a rotation and the contacts released by the last
 decision.
@@ -22,6 +23,7 @@ from parsim.core.sdbd.constants import (
     CYCLE_CLOSE_GAP,
     MAX_CONTACTS,
     OB_FLOOR,
+    OB_SIDE,
     OB_SPHERE,
     OB_WALL_XHI,
     OB_WALL_XLO,
@@ -30,6 +32,7 @@ from parsim.core.sdbd.constants import (
     TOUCH_TOL,
 )
 from parsim.core.sdbd.grid import grid_collect_growing, min_image
+from parsim.core.sdbd.polygon import candidate_sides, side_plane
 
 __all__ = [
     "plane_of",
@@ -43,9 +46,10 @@ __all__ = [
 
 
 @jit(inline="always")
-def plane_of(ob, r, geom, nrm):
-    """Normal (-> nrm) and level of the plane obstacle ``ob`` for a sphere of radius ``r``:
-    the sphere's centre ``a`` must satisfy ``nrm . a >= level``."""
+def plane_of(ob, j, r, geom, nrm):
+    """Normal (-> nrm) and level of the plane obstacle ``ob`` (a side of the cylinder: side
+    ``j``) for a sphere of radius ``r``: the sphere's centre ``a`` must satisfy
+    ``nrm . a >= level``."""
     nrm[0] = 0.0
     nrm[1] = 0.0
     nrm[2] = 0.0
@@ -61,6 +65,8 @@ def plane_of(ob, r, geom, nrm):
     if ob == OB_WALL_YLO:
         nrm[1] = 1.0
         return geom[1] + r
+    if ob == OB_SIDE:
+        return side_plane(geom, j, r, nrm)
     nrm[1] = -1.0
     return -(geom[1] + geom[3] - r)
 
@@ -137,7 +143,7 @@ def fill_contacts(n_c, contacts, particle, sediment, geom, geometry, nrm):
             cN[l, 2] = n2 / nn
             cc0[l] = 0.0
         else:
-            c0 = plane_of(ob, rad[i], geom, nrm)
+            c0 = plane_of(ob, c_sediment[l], rad[i], geom, nrm)
             for k in range(3):
                 cP[l, k] = pos[i, k]
                 cN[l, k] = nrm[k]
@@ -171,7 +177,7 @@ def keep_touching(n_c, contacts, n_dr, released, particle, sediment, geom, ell, 
                           + (pos[i, 1] - sed[j, 1] - r_shift[r, 1]) ** 2
                           + (pos[i, 2] - sed[j, 2]) ** 2) - rad[i] - sed_r[j]
         else:
-            c0 = plane_of(ob, rad[i], geom, nrm)
+            c0 = plane_of(ob, j, rad[i], geom, nrm)
             g = nrm[0] * pos[i, 0] + nrm[1] * pos[i, 1] + nrm[2] * pos[i, 2] - c0
         if g <= TOUCH_TOL * ell:
             n_c = add_contact(n_c, contacts, i, ob, j, r_shift[r, 0], r_shift[r, 1])
@@ -212,16 +218,31 @@ def near_contacts(n, particle, n_c, contacts, sediment, grid, walls, ell, buf, n
                 break
             n_c = add_contact(n_c, contacts, i, OB_SPHERE, j, mx - rx, my - ry)
             added += 1
-        last = OB_WALL_YHI if walls else OB_FLOOR
+        n_sides = igeom[3]
+        last = OB_WALL_YHI if walls and n_sides == 0 else OB_FLOOR
         for ob in range(OB_FLOOR, last + 1):
-            c0 = plane_of(ob, rad[i], geom, nrm)
-            g = nrm[0] * pos[i, 0] + nrm[1] * pos[i, 1] + nrm[2] * pos[i, 2] - c0
-            if g > lim or n_c >= MAX_CONTACTS:
-                continue
-            if find_contact(n_c, contacts, i, ob, -1) >= 0:
-                continue
-            n_c = add_contact(n_c, contacts, i, ob, -1, 0.0, 0.0)
-            added += 1
-            if ob == OB_FLOOR:
+            n_c, new = _close_plane(n_c, contacts, i, ob, -1, pos, rad, geom, lim, nrm)
+            added += new
+            if new and ob == OB_FLOOR:
                 floor_added = True
+        if walls and n_sides > 0:
+            first, count = candidate_sides(geom, n_sides, pos[i, 0], pos[i, 0], pos[i, 1], pos[i, 1],
+                                           rad[i] + lim)
+            for t in range(count):
+                n_c, new = _close_plane(n_c, contacts, i, OB_SIDE, (first + t) % n_sides, pos, rad,
+                                        geom, lim, nrm)
+                added += new
     return n_c, added, floor_added, buf
+
+
+@jit(inline="always")
+def _close_plane(n_c, contacts, i, ob, j, pos, rad, geom, lim, nrm):
+    """Add the plane ``(ob, j)`` as a contact of sphere ``i`` if it is within ``lim`` of it and
+    not a contact yet; returns ``(n_c, 1 if added else 0)``."""
+    c0 = plane_of(ob, j, rad[i], geom, nrm)
+    g = nrm[0] * pos[i, 0] + nrm[1] * pos[i, 1] + nrm[2] * pos[i, 2] - c0
+    if g > lim or n_c >= MAX_CONTACTS:
+        return n_c, 0
+    if find_contact(n_c, contacts, i, ob, j) >= 0:
+        return n_c, 0
+    return add_contact(n_c, contacts, i, ob, j, 0.0, 0.0), 1

@@ -35,7 +35,10 @@ Boundary modelling choices (not in the paper):
   the moving sphere that touches the plane: the plane holds that sphere (no sliding), the
   sphere stays tangent to the plane, and its contact opens when the particle rolls away;
 * under FLOOR_STOP (the paper) the first floor contact immobilises the particle;
-* a contact with a plane whose normal is horizontal (a wall) never blocks falling.
+* a contact with a plane whose normal is horizontal (a wall) never blocks falling;
+* a cylindrical container is the polygon of planar walls inscribed in it (:mod:`.polygon`),
+  each side a wall as above;
+* a substrate is a set of sediment spheres laid before the first particle (never moving).
 
 The state the loop hands around is a set of named bundles (:mod:`.bundles`): the
 :class:`~.bundles.Particle`, its contact lists and their geometry, the window of candidate
@@ -74,6 +77,7 @@ from parsim.core.sdbd.fall import fall
 from parsim.core.sdbd.grid import empty_grid, grid_insert, wrap_position
 from parsim.core.sdbd.overlap import max_overlap
 from parsim.core.sdbd.particle import drop_particle, place_spheres
+from parsim.core.sdbd.polygon import GEOM_CONTAINER
 from parsim.core.sdbd.rolling import roll
 from parsim.core.sdbd.rotation import matrix_to_quat
 
@@ -88,7 +92,7 @@ D_CLOCKED_SECONDS = 3  # wall-clock seconds from the start of particle clock_fro
 
 @jit
 def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                   particle_rotation, particle_drop_xy,
+                   particle_rotation, particle_drop_xy, substrate_centre, substrate_radius,
                    geom, igeom, head, col_top, nxt, hkeys, hval, counts,
                    floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell,
                    debug, trace_particle, trace, clock_from,
@@ -96,12 +100,15 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
                    out_events, out_steps, diag):
     """Deposit all particles; returns ``(stopped_at, n_spheres_written)``.
 
-    Inputs are validated by :func:`parsim.core.sdbd.deposit`.  ``geom, igeom, head, ...``
-    is an empty grid from :func:`grid.grid_new` whose cell is at least the first particle's
-    largest sphere diameter; it grows with the largest sphere so far (:func:`_fit_grid`), so
-    that nothing of a particle's descent depends on the particles after it.  ``out_*`` are
-    preallocated outputs for
-    all particles (a :class:`.bundles.Record`); ``diag`` (4,) receives diagnostics
+    Inputs are validated by :func:`parsim.core.sdbd.deposit`.  The ``m`` spheres of the
+    substrate (``substrate_centre`` (m, 3), ``substrate_radius`` (m,)) are sediment spheres
+    ``0 .. m - 1`` before the first particle; the particles' spheres follow them.
+    ``geom, igeom, head, ...`` is an empty grid from :func:`grid.grid_new` (for
+    ``m + len(out_rad)`` spheres) whose cell is at least the first particle's and the
+    substrate's largest sphere diameter; it grows with the largest sphere so far
+    (:func:`_fit_grid`), so that nothing of a particle's descent depends on the particles
+    after it.  ``out_*`` are preallocated outputs for all particles (a
+    :class:`.bundles.Record`, without the substrate); ``diag`` (4,) receives diagnostics
     (largest overlap after a move when ``debug``, number of steps, number of chunk steps).
     The steps of particle ``trace_particle`` (``-1``: none) are recorded in the rows of
     ``trace`` (T, 16): motion, number of contacts before the step, pivot contacts k and m,
@@ -123,14 +130,14 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     grid = Grid(geom, igeom, head, col_top, nxt, hkeys, hval, counts)
     record = Record(out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state, out_events,
                     out_steps)
-    sediment = Sediment(np.empty((max(n_total, 1), 3)), np.empty(max(n_total, 1)))
+    n_sub = substrate_radius.shape[0]
+    sediment = Sediment(np.empty((max(n_sub + n_total, 1), 3)), np.empty(max(n_sub + n_total, 1)))
     particle = Particle(np.empty((n_max, 3)), np.empty(n_max), np.empty((n_max, 3)), np.empty(3),
                         np.empty(4), np.empty((3, 3)))
     work = new_workspace()
     history = new_descent_history()
     buf = np.empty(4096, dtype=np.int64)
-    n_sed = 0
-    top_z = 0.0
+    n_sed, top_z = _lay_substrate(substrate_centre, substrate_radius, sediment, grid)
     worst_overlap = -np.inf
     n_steps = 0
     n_chunk_ends = 0
@@ -161,13 +168,13 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
         if debug:
             overlap, buf = max_overlap(n, particle, sediment, grid, settings.walls, buf)
             worst_overlap = max(worst_overlap, overlap)
-        n_sed, top_z = _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, top_z, record)
+        n_sed, top_z = _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, top_z, record)
     diag[D_MAX_OVERLAP] = worst_overlap
     diag[D_EVENTS] = n_steps
     diag[D_CHUNKS] = n_chunk_ends
     if 0 <= clock_from < n_part:
         diag[D_CLOCKED_SECONDS] = _wall_clock() - clock_start
-    return stopped_at, n_sed
+    return stopped_at, n_sed - n_sub
 
 
 @jit(inline="always")
@@ -253,7 +260,8 @@ def _fit_grid(n, particle, sediment, n_sed, grid):
         return
     sed = sediment.centre
     geom, igeom, head, col_top, nxt, hkeys, hval, counts = empty_grid(
-        grid.igeom[0], geom[0], geom[1], geom[2], geom[3], cell, grid.nxt.shape[0])
+        grid.igeom[0], geom[0], geom[1], geom[2], geom[3], cell, grid.nxt.shape[0], geom[GEOM_CONTAINER:],
+        grid.igeom[3])
     for j in range(n_sed):
         head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j,
                                                  sed[j, 0], sed[j, 1], sed[j, 2])
@@ -284,27 +292,48 @@ def _rest_state(n_c, obstacles):
 
 
 @jit(inline="always")
-def _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, top_z, record):
-    """Particle ``p`` at rest joins the sediment and the grid and is written to the record;
-    returns the new number of sediment spheres and top of the sediment."""
+def _join_sediment(j, x, y, z, r, sediment, grid):
+    """Sphere ``j`` (centre ``x, y, z`` wrapped into a periodic box, radius ``r``) joins the
+    sediment and the grid."""
+    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_arrays(grid)
+    wx, wy = wrap_position(geom, igeom, x, y)
+    sediment.centre[j, 0] = wx
+    sediment.centre[j, 1] = wy
+    sediment.centre[j, 2] = z
+    sediment.radius[j] = r
+    head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy, z)
+    # the grid's arrays grow with the pile
+    grid.head = head
+    grid.col_top = col_top
+    grid.hkeys = hkeys
+    grid.hval = hval
+
+
+@jit(inline="always")
+def _lay_substrate(centre, radius, sediment, grid):
+    """The substrate's spheres are the first sediment spheres; returns their number and the top
+    of the sediment they make (0 without a substrate)."""
+    top_z = 0.0
+    for j in range(radius.shape[0]):
+        _join_sediment(j, centre[j, 0], centre[j, 1], centre[j, 2], radius[j], sediment, grid)
+        top_z = max(top_z, centre[j, 2] + radius[j])
+    return radius.shape[0], top_z
+
+
+@jit(inline="always")
+def _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, top_z, record):
+    """Particle ``p`` at rest joins the sediment and the grid and is written to the record
+    (whose spheres are the sediment's after the ``n_sub`` of the substrate); returns the new
+    number of sediment spheres and top of the sediment."""
     pos = particle.centre
     rad = particle.radius
-    sed = sediment.centre
-    sed_r = sediment.radius
-    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_arrays(grid)
     for i in range(n):
-        j = n_sed
+        j = n_sed - n_sub
         for k in range(3):
             record.positions[j, k] = pos[i, k]
         record.radii[j] = rad[i]
         record.particle[j] = p
-        wx, wy = wrap_position(geom, igeom, pos[i, 0], pos[i, 1])
-        sed[j, 0] = wx
-        sed[j, 1] = wy
-        sed[j, 2] = pos[i, 2]
-        sed_r[j] = rad[i]
-        head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts,
-                                                 j, wx, wy, pos[i, 2])
+        _join_sediment(n_sed, pos[i, 0], pos[i, 1], pos[i, 2], rad[i], sediment, grid)
         top_z = max(top_z, pos[i, 2] + rad[i])
         n_sed += 1
     for k in range(3):
@@ -312,11 +341,6 @@ def _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, top_z, record):
     matrix_to_quat(particle.rotation, record.rotation[p])
     record.contacts[p] = n_c
     record.state[p] = state
-    # the grid's arrays grow with the pile
-    grid.head = head
-    grid.col_top = col_top
-    grid.hkeys = hkeys
-    grid.hval = hval
     return n_sed, top_z
 
 

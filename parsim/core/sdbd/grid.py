@@ -20,8 +20,10 @@ the cells of the surface of the pile, where all queries happen, share few memory
 
 State is kept in plain arrays so that numba kernels can own and grow it:
 
-``geom``     float64 ``[lo_x, lo_y, L_x, L_y, ax, ay, az]``
-``igeom``    int64 ``[mode, ncx, ncy]`` (mode = lateral boundary code)
+``geom``     float64 ``[lo_x, lo_y, L_x, L_y, ax, ay, az]``, then the cylinder's polygon if any
+             (:mod:`.polygon`)
+``igeom``    int64 ``[mode, ncx, ncy, n_sides]`` (mode = lateral boundary code, n_sides the
+             polygon's sides, 0 for the box)
 ``head``     int64 ``(n_layer_capacity, n_col_capacity)``
 ``col_top``  int64 ``(n_col_capacity,)``
 ``nxt``      int64 ``(n_spheres_capacity,)``
@@ -52,19 +54,22 @@ _HASH_A = 0x9E3779B97F4A7C15 >> 1
 _HASH_B = 0xC2B2AE3D27D4EB4F >> 1
 
 
-def grid_new(lateral, box_lower_xy, box_upper_xy, cell, n_spheres):
-    """Empty grid for spheres of diameter ``<= cell``; returns the tuple of state arrays."""
+def grid_new(lateral, box_lower_xy, box_upper_xy, cell, n_spheres, polygon=None, n_sides=0):
+    """Empty grid for spheres of diameter ``<= cell``; returns the tuple of state arrays.
+    ``polygon`` (:func:`.polygon.polygon_geometry`) and ``n_sides`` describe a cylinder."""
     lo = np.asarray(box_lower_xy, dtype=np.float64)
     hi = np.asarray(box_upper_xy, dtype=np.float64)
     length = np.zeros(2) if lateral == LATERAL_NONE else hi - lo
+    polygon = np.zeros(0) if polygon is None else np.ascontiguousarray(polygon, dtype=np.float64)
     return empty_grid(int(lateral), float(lo[0]), float(lo[1]), float(length[0]), float(length[1]),
-                      float(cell), int(n_spheres))
+                      float(cell), int(n_spheres), polygon, int(n_sides))
 
 
 @jit
-def empty_grid(lateral, lo_x, lo_y, length_x, length_y, cell, n_spheres):
+def empty_grid(lateral, lo_x, lo_y, length_x, length_y, cell, n_spheres, polygon, n_sides):
     """Empty grid for spheres of diameter ``<= cell`` in the box of lower corner ``lo`` and
-    side lengths ``length`` (ignored for LATERAL_NONE); returns the tuple of state arrays."""
+    side lengths ``length`` (ignored for LATERAL_NONE), with the cylinder's ``polygon`` of
+    ``n_sides`` (an empty array and 0 for the box); returns the tuple of state arrays."""
     if lateral == LATERAL_NONE:
         ncx = 0
         ncy = 0
@@ -83,8 +88,9 @@ def empty_grid(lateral, lo_x, lo_y, length_x, length_y, cell, n_spheres):
         ay = length_y / ncy
         ncol = ncx * ncy
         hcap = 2
-    geom = np.array([lo_x, lo_y, length_x, length_y, ax, ay, cell], dtype=np.float64)
-    igeom = np.array([lateral, ncx, ncy], dtype=np.int64)
+    geom = np.concatenate((np.array([lo_x, lo_y, length_x, length_y, ax, ay, cell], dtype=np.float64),
+                           polygon))
+    igeom = np.array([lateral, ncx, ncy, n_sides], dtype=np.int64)
     head = np.full((8, ncol), -1, dtype=np.int64)
     col_top = np.full(ncol, -1, dtype=np.int64)
     nxt = np.full(max(1, n_spheres), -1, dtype=np.int64)

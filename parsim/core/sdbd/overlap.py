@@ -1,5 +1,5 @@
 """Debug measure of a move: the largest overlap of the moving particle with the sediment,
-the floor and the walls (``check_overlaps`` of :func:`parsim.core.sdbd.deposit_with_diagnostics`)."""
+the floor and the walls or the cylinder's sides (``check_overlaps`` of :func:`parsim.core.sdbd.deposit_with_diagnostics`)."""
 
 import math
 
@@ -8,14 +8,15 @@ import numpy as np
 from parsim.core.jit import jit
 from parsim.core.sdbd.bundles import grid_arrays
 from parsim.core.sdbd.grid import grid_collect_growing, min_image
+from parsim.core.sdbd.polygon import candidate_sides, side_gap_in_box
 
 __all__ = ["max_overlap"]
 
 
 @jit
 def max_overlap(n, particle, sediment, grid, lateral_walls, buf):
-    """Largest overlap of the moving spheres with the sediment, the floor and walls;
-    returns it and the (possibly grown) query buffer."""
+    """Largest overlap of the moving spheres with the sediment, the floor and walls (or the
+    cylinder's sides); returns it and the (possibly grown) query buffer."""
     pos = particle.centre
     rad = particle.radius
     sed = sediment.centre
@@ -37,7 +38,16 @@ def max_overlap(n, particle, sediment, grid, lateral_walls, buf):
         ov = rad[i] - pos[i, 2]
         if ov > worst:
             worst = ov
-        if lateral_walls:
+        n_sides = igeom[3]
+        if lateral_walls and n_sides > 0:
+            x = pos[i, 0]
+            y = pos[i, 1]
+            first, count = candidate_sides(geom, n_sides, x, x, y, y, rad[i])
+            for t in range(count):
+                ov = -side_gap_in_box(geom, (first + t) % n_sides, rad[i], x, x, y, y)
+                if ov > worst:
+                    worst = ov
+        elif lateral_walls:
             for k in range(2):
                 ov = geom[k] + rad[i] - pos[i, k]
                 if ov > worst:

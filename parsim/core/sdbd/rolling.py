@@ -15,8 +15,8 @@ rotation, each an angle ``phi`` about the axis, are
   25-30 and the virtual small rotation of eq. 31);
 * the frustrated situation of 4.1 (:func:`.frustration.decision_changes`);
 * a new contact of any moving sphere (:func:`_new_contact_events`) with a sediment sphere
-  (circle intersections, eqs. 7-12), with the floor (eqs. 19-23) or with a wall (the same,
-  vertical planes).
+  (circle intersections, eqs. 7-12), with the floor (eqs. 19-23) or with a wall or a side of
+  the cylinder's polygon (the same, vertical planes; :func:`_side_contact_events`).
 
 The earliest event and those within ``SIMULTANEOUS_TOL`` of arc length of it are executed
 together (4.3): the particle turns by eq. 15 and the pivots and the contacts made are its new
@@ -53,6 +53,7 @@ from parsim.core.sdbd.constants import (
     MOTION_SINGLE,
     NZ_TOL,
     OB_FLOOR,
+    OB_SIDE,
     OB_SPHERE,
     OB_WALL_XLO,
     RATE_TOL,
@@ -74,6 +75,7 @@ from parsim.core.sdbd.events import (
 from parsim.core.sdbd.frustration import decision_changes
 from parsim.core.sdbd.grid import grid_collect, min_image
 from parsim.core.sdbd.particle import rotate_particle
+from parsim.core.sdbd.polygon import candidate_sides, side_gap_in_box, side_plane
 from parsim.core.sdbd.rotation import rotate_point
 from parsim.core.sdbd.ties import earliest_event, push_event
 
@@ -257,8 +259,8 @@ def _release_events(com, k, m, work, axis, pivot, settings, n_t, best, tol_phi):
 @jit(inline="always")
 def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment, grid, settings,
                         n_t, best, tol_phi, buf):
-    """New contacts of every moving sphere with the floor (eqs. 19-23), the walls (the same,
-    vertical planes) and the sediment spheres (eqs. 7-12).  A contact released by the
+    """New contacts of every moving sphere with the floor (eqs. 19-23), the walls or the
+    cylinder's sides (the same, vertical planes) and the sediment spheres (eqs. 7-12).  A contact released by the
     decision is trusted to open (``POLICY_TRUSTED`` of :func:`.events.first_entry`); a
     pivot cannot be made again."""
     window = work.window
@@ -269,6 +271,7 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
     sed_r = sediment.radius
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
     walls = settings.walls
+    n_sides = igeom[3]
     reach_sed = 0.5 * geom[6]  # bounds every sediment radius
     pivots = work.pivots
     released = work.released
@@ -315,10 +318,14 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
                 if phi <= best + tol_phi:
                     n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, OB_FLOOR, -1,
                                            0.0, 0.0, window)
-        if walls:
+        if walls and n_sides > 0:
+            n_t, best = _side_contact_events(i, pos, ri, rho, e1, e2, o0 + xlo, o0 + xhi, o1 + ylo, o1 + yhi,
+                                             n_pivots, pivots, n_dr, released, geom, n_sides, ell, n_t,
+                                             best, tol_phi, window, nrm)
+        elif walls:
             for wdir in range(4):
                 ob = OB_WALL_XLO + wdir
-                c0 = plane_of(ob, ri, geom, nrm)
+                c0 = plane_of(ob, -1, ri, geom, nrm)
                 if wdir == 0:
                     near = o0 + xlo - ri - geom[0]
                 elif wdir == 1:
@@ -381,6 +388,31 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
                 n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, OB_SPHERE, j,
                                        mx - rx, my - ry, window)
     return n_t, best, buf
+
+
+@jit(inline="always")
+def _side_contact_events(i, pos, ri, rho, e1, e2, x0, x1, y0, y1, n_pivots, pivots, n_dr, released, geom,
+                         n_sides, ell, n_t, best, tol_phi, window, nrm):
+    """New contacts of moving sphere ``i`` (radius ``ri``, its centre on the circle of radius
+    ``rho`` and frame ``e1, e2``, its arc within ``[x0, x1] x [y0, y1]``) with the sides of
+    the cylinder's polygon it can reach, as for a box wall."""
+    first, count = candidate_sides(geom, n_sides, x0, x1, y0, y1, ri + TOUCH_TOL * ell)
+    for t in range(count):
+        side = (first + t) % n_sides
+        if side_gap_in_box(geom, side, ri, x0, x1, y0, y1) > TOUCH_TOL * ell:
+            continue
+        if find_contact(n_pivots, pivots, i, OB_SIDE, side) >= 0:
+            continue
+        pol = POLICY_TRUSTED if find_contact(n_dr, released, i, OB_SIDE, side) >= 0 else POLICY_NEW
+        c0 = side_plane(geom, side, ri, nrm)
+        A = -(nrm[0] * e1[0] + nrm[1] * e1[1])
+        B = -(nrm[0] * e2[0] + nrm[1] * e2[1])
+        gap = nrm[0] * pos[i, 0] + nrm[1] * pos[i, 1] - c0
+        phi, cc, ss = first_entry(A, B, A + gap / rho, gap, 1.0 / rho, ell, pol)
+        if phi <= best + tol_phi:
+            n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, OB_SIDE, side,
+                                   0.0, 0.0, window)
+    return n_t, best
 
 
 @jit(inline="always")
