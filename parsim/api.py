@@ -174,8 +174,9 @@ def deposit(n_particles: int, *, seed: int, **parameters: Any) -> TaskOutcome:
 
     ``parameters``: any of the deposition job's keys (docs/jobs.md: ``shape``, ``shape_size``,
     ``box_length``, ``lateral``, ...), checked as a job's with the same messages, and
-    ``length_unit``; the others take the solver's defaults.  The random stream is that of task
-    ``p0000_r0000`` of a job with this ``seed``, so the outcome equals that task of ``parsim
+    ``length_unit``; the others take the solver's defaults.  ``species`` and ``layers`` take a
+    list of dicts, the entries of the job file's ``[[species]]`` and ``[[layers]]``.  The random
+    stream is that of task ``p0000_r0000`` of a job with this ``seed``, so the outcome equals that task of ``parsim
     run`` bit for bit.  Serial; under mpiexec each rank that calls it computes it.
     """
     return _solve_one_task("deposition", "deposit", seed, {"n_particles": n_particles, **parameters})
@@ -205,7 +206,8 @@ def _solve_one_task(kind: str, name: str, seed: int, parameters: dict[str, Any])
     from parsim.solvers import SOLVERS
 
     units = {unit.key: parameters.pop(unit.key) for unit in UNIT_KEYS if unit.key in parameters}
-    job = Job.from_dict({"name": name, "kind": kind, "seed": seed, "realizations": 1, **units,
+    tables = {table.name: parameters.pop(table.name) for table in SOLVERS[kind].tables if table.name in parameters}
+    job = Job.from_dict({"name": name, "kind": kind, "seed": seed, "realizations": 1, **units, **tables,
                          "parameters": parameters}, source=f"parsim.{name}")
     _prepare_kernels(job)
     result = solve_task(job, TASK, MPI.COMM_SELF)

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from parsim.errors import JobError
-from parsim.solver import Solver
+from parsim.solver import Solver, TableArray
 
 SI_PREFIXES = ("Y", "Z", "E", "P", "T", "G", "M", "k", "h", "da", "d", "c", "m", "u", "n", "p", "f", "a", "z", "y")
 """The SI prefixes as UDUNITS spells them (u: micro)."""
@@ -79,6 +79,7 @@ def default_units() -> dict[str, str]:
 
 TOP_LEVEL_KEYS = ("name", "kind", "seed", "realizations", "output", *(unit.key for unit in UNIT_KEYS),
                   "parameters", "sweep")
+"""The keys of every job; a solver adds its arrays of tables (:attr:`parsim.solver.Solver.tables`)."""
 REQUIRED_TOP_LEVEL = ("name", "kind", "seed", "realizations")
 TOML_INTEGERS = (-2**63, 2**63 - 1)
 """The integers of a TOML file (64-bit); tomllib returns larger ones too."""
@@ -114,6 +115,7 @@ class Job:
     text: str  # the job file as written
     input_hashes: dict[str, dict[str, str]]  # file parameter -> {path as written: SHA-256 of the content}
     units: dict[str, str] = field(default_factory=default_units)  # quantity -> UDUNITS symbol, e.g. "length": "m"
+    tables: dict[str, tuple[dict, ...]] = field(default_factory=dict)  # [[name]] -> its entries, keys as written
 
     @property
     def sweep_shape(self) -> tuple[int, ...]:
@@ -124,10 +126,16 @@ class Job:
         return int(np.prod(self.sweep_shape, dtype=np.int64))
 
     def point_parameters(self, point: int) -> dict[str, Any]:
-        """All parameters of sweep point ``point`` (row-major over the sweep, last key fastest)."""
+        """All parameters of sweep point ``point`` (row-major over the sweep, last key fastest),
+        with the job's arrays of tables (``params["species"]``: a tuple of dicts)."""
         index = np.unravel_index(point, self.sweep_shape) if self.sweep else ()
         swept = {name: values[i] for (name, values), i in zip(self.sweep.items(), index)}
-        return {**self.fixed, **swept}
+        return {**self.constants, **swept}
+
+    @property
+    def constants(self) -> dict[str, Any]:
+        """What every point shares: the fixed parameters and the arrays of tables."""
+        return {**self.fixed, **self.tables}
 
     def tasks(self) -> list[Task]:
         return [Task(p, r) for p in range(self.n_points) for r in range(self.realizations)]
@@ -153,6 +161,11 @@ class Job:
         """
         lines = [f"{path} {digest}" for files in self.input_hashes.values() for path, digest in files.items()]
         return {"input_files": "\n".join(lines)}
+
+    @property
+    def table_attributes(self) -> dict[str, str]:
+        """The arrays of tables as attributes of the dataset and task files: JSON, one per array."""
+        return {name: json.dumps(entries) for name, entries in self.tables.items()}
 
     @property
     def unit_attributes(self) -> dict[str, str]:
@@ -208,9 +221,6 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
 
     _check_integers(document, "", fail)
 
-    unknown = [key for key in document if key not in TOP_LEVEL_KEYS]
-    if unknown:
-        fail(f"unknown key {unknown[0]!r}; allowed top-level keys: {', '.join(TOP_LEVEL_KEYS)}")
     for key in REQUIRED_TOP_LEVEL:
         if key not in document:
             fail(f"missing key {key!r}")
@@ -222,6 +232,10 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
     if kind not in solvers:
         fail(f"kind = {kind!r}: allowed: {', '.join(repr(k) for k in solvers)}")
     solver = solvers[kind]
+    allowed = (*TOP_LEVEL_KEYS, *(table.name for table in solver.tables))
+    unknown = [key for key in document if key not in allowed]
+    if unknown:
+        fail(f"unknown key {unknown[0]!r}; allowed top-level keys for kind {kind!r}: {', '.join(allowed)}")
     seed = _top(document, "seed", int, fail)
     if not 0 <= seed <= MAX_SEED:
         fail(f"seed = {seed}: allowed: an integer, 0 <= seed <= {MAX_SEED}")
@@ -234,13 +248,15 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
 
     units = {unit.quantity: _unit(document, unit, fail) for unit in UNIT_KEYS}
     fixed, sweep = _parameters(document, solver, source, fail)
+    tables = {table.name: _table_entries(document, table, source, fail) for table in solver.tables
+              if table.name in document}
     n_points = math.prod(len(values) for values in sweep.values())
     if n_points * realizations > MAX_TASKS:
         fail(f"{n_points} parameter points x {realizations} realizations = {n_points * realizations} tasks; "
              f"allowed: at most {MAX_TASKS} tasks (each writes a file); lower realizations or the [sweep]")
     job = Job(name=name, kind=kind, seed=seed, realizations=realizations, output=Path(out),
-              fixed=fixed, sweep=sweep, text=text, input_hashes=_input_hashes(solver, fixed, sweep, fail),
-              units=units)
+              fixed=fixed, sweep=sweep, text=text, input_hashes=_input_hashes(solver, fixed, sweep, tables, fail),
+              units=units, tables=tables)
     for point in range(job.n_points):
         params = job.point_parameters(point)
         try:
@@ -303,14 +319,42 @@ def _parameters(document: dict, solver: Solver, source: str, fail) -> tuple[dict
     return fixed, sweep
 
 
-def _input_hashes(solver: Solver, fixed: dict, sweep: dict, fail) -> dict[str, dict[str, str]]:
-    """The SHA-256 of every file the job names, by parameter and path (an empty path names no file)."""
-    hashes = {}
+def _table_entries(document: dict, table: TableArray, source: str, fail) -> tuple[dict, ...]:
+    """The entries of the array of tables ``[[table]]``, each key checked; keys as written, no defaults."""
+    entries = document[table.name]
+    if not isinstance(entries, list) or not entries or not all(isinstance(e, dict) for e in entries):
+        fail(f"{table.name} must be an array of tables, each entry starting with a line [[{table.name}]]")
+    if len(entries) > table.limit:
+        fail(f"{len(entries)} [[{table.name}]] entries; allowed: at most {table.limit}")
+    declared = {p.name: p for p in table.parameters}
+    checked = []
+    for i, entry in enumerate(entries):
+        where = f"[[{table.name}]] entry {i + 1}"
+        for key in entry:
+            if key not in declared:
+                fail(f"{where}: unknown key {key!r}; allowed keys: {', '.join(declared)}")
+        for key in table.required:
+            if key not in entry:
+                fail(f"{where}: missing key {key!r} ({declared[key].description}); allowed: {declared[key].allowed()}")
+        checked.append({key: declared[key].coerce(value, f"{source}: {where}: {key}") for key, value in entry.items()})
+    return tuple(checked)
+
+
+def _input_hashes(solver: Solver, fixed: dict, sweep: dict, tables: dict, fail) -> dict[str, dict[str, str]]:
+    """The SHA-256 of every file the job names, by parameter and path (an empty path names no file);
+    a file named in an array of tables is listed under ``[[table]] key``."""
+    named = {}
     for parameter in (p for p in solver.parameters if p.is_file):
-        values = sweep[parameter.name] if parameter.name in sweep else [fixed[parameter.name]]
-        paths = [path for path in values if path]
+        named[parameter.name] = sweep[parameter.name] if parameter.name in sweep else [fixed[parameter.name]]
+    for table in solver.tables:
+        for parameter in (p for p in table.parameters if p.is_file):
+            named[f"[[{table.name}]] {parameter.name}"] = [entry.get(parameter.name, "")
+                                                           for entry in tables.get(table.name, ())]
+    hashes = {}
+    for key, values in named.items():
+        paths = [path for path in dict.fromkeys(values) if path]
         if paths:
-            hashes[parameter.name] = {path: _sha256(parameter.name, path, fail) for path in paths}
+            hashes[key] = {path: _sha256(key, path, fail) for path in paths}
     return hashes
 
 
@@ -377,12 +421,24 @@ def _toml_document(document: Mapping[str, Any], source: str) -> str:
     if not isinstance(document, Mapping):
         raise JobError(f"{source}: a job must be a dict of its keys (name, kind, seed, ...), got {document!r}")
     plain = [f"{_toml_key(key, '', source)} = {_toml_value(value, key, source)}\n"
-             for key, value in document.items() if not isinstance(value, Mapping)]
-    tables = [f"\n[{_toml_key(key, '', source)}]\n" + "".join(
-        f"{_toml_key(name, key, source)} = {_toml_value(value, f'[{key}] {name}', source)}\n"
-        for name, value in table.items())
-        for key, table in document.items() if isinstance(table, Mapping)]
-    return "".join(plain + tables)
+             for key, value in document.items() if not isinstance(value, Mapping) and not _is_table_array(value)]
+    tables = [_toml_section(f"[{_toml_key(key, '', source)}]", table, key, source, f"[{key}]")
+              for key, table in document.items() if isinstance(table, Mapping)]
+    arrays = [_toml_section(f"[[{_toml_key(key, '', source)}]]", entry, f"[[{key}]] entry {i + 1}", source,
+                            f"[[{key}]] entry {i + 1}")
+              for key, entries in document.items() if _is_table_array(entries) for i, entry in enumerate(entries)]
+    return "".join(plain + tables + arrays)
+
+
+def _is_table_array(value: Any) -> bool:
+    return isinstance(value, (list, tuple)) and bool(value) and all(isinstance(item, Mapping) for item in value)
+
+
+def _toml_section(header: str, table: Mapping, name_of_table: str, source: str, where: str) -> str:
+    """One section; ``name_of_table`` names the table in a key error, ``where`` in a value error."""
+    return f"\n{header}\n" + "".join(f"{_toml_key(name, name_of_table, source)} = "
+                                     f"{_toml_value(value, f'{where} {name}', source)}\n"
+                                     for name, value in table.items())
 
 
 def _toml_key(key: Any, table: str, source: str) -> str:

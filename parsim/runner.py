@@ -132,7 +132,7 @@ def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult | None:
 def task_attributes(job: Job, task: Task) -> dict:
     """The root attributes of ``task``'s file: its parameters, input files, units and origin."""
     seed = job.seed_sequence(task, SOLVERS[job.kind])
-    return {**job.point_parameters(task.point), **job.input_attributes, **job.unit_attributes,
+    return {**job.point_parameters(task.point), **job.table_attributes, **job.input_attributes, **job.unit_attributes,
             "job_name": job.name, "job_seed": job.seed, "spawn_key": list(seed.spawn_key), "point": task.point,
             "realization": task.realization}
 

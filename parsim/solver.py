@@ -34,8 +34,19 @@ def resolve_units(text: str, units: dict[str, str]) -> str:
 
 
 def flag_attributes(meanings: tuple[str, ...], dtype: str = "int8") -> dict:
-    """CF attributes of a variable that codes ``meanings`` as the integers 0, 1, ... (CF section 3.5)."""
-    return {"flag_values": np.arange(len(meanings), dtype=dtype), "flag_meanings": " ".join(meanings)}
+    """CF attributes of a variable that codes ``meanings`` as the integers 0, 1, ... (CF section 3.5).
+
+    A single value is a scalar, as netCDF reads a one-element attribute back: a dataset in memory
+    is then identical to the file it is written to."""
+    values = np.arange(len(meanings), dtype=dtype)
+    return {"flag_values": values if len(values) > 1 else values[0], "flag_meanings": " ".join(meanings)}
+
+
+def coded_coordinate(long_name: str, meanings: tuple[str, ...]) -> "Coordinate":
+    """A coordinate of named values (Cartesian components, species), coded as CF flags: int8
+    values whose ``flag_meanings`` name them, since CF coordinates are numbers."""
+    return Coordinate(np.arange(len(meanings), dtype="int8"), "1", f"{long_name} (coded: flag_meanings names each "
+                      "flag_value)", attrs=flag_attributes(meanings))
 
 
 def flag_value(attrs: dict, meaning: str) -> int:
@@ -99,6 +110,23 @@ class TaskResult:
 
 
 @dataclass(frozen=True)
+class TableArray:
+    """An array of tables of a job file (``[[species]]``): a list of entries, each a table of keys.
+
+    An entry may set each key of ``parameters`` (checked by its :class:`Parameter`); a key
+    of ``required`` must be set.  ``parameters`` may hold solver parameters: an entry's value
+    then replaces the job's for that entry (a species' own shape, say).  ``limit`` bounds the
+    number of entries.  A solver's ``check`` does the checks across entries.
+    """
+
+    name: str
+    description: str
+    parameters: tuple[Parameter, ...]
+    required: tuple[str, ...] = ()
+    limit: int = 64
+
+
+@dataclass(frozen=True)
 class Solver:
     """A kind of job.
 
@@ -118,6 +146,9 @@ class Solver:
       ranks (``parsim run --ranks-per-task``; size 1 = serial); every rank of it calls
       ``solve`` with the same arguments, and the result of its rank 0 is the task's
       (the other ranks may return None);
+    - ``tables``: the arrays of tables a job of this kind may hold (``[[species]]``); the
+      entries reach ``check``, ``cost``, ``memory`` and ``solve`` as ``params[name]``, a tuple
+      of dicts holding the keys each entry sets;
     - ``decomposable``: whether ``solve`` can use a group of several ranks.  A solver
       that cannot always gets a group of one: the runner calls it on the group's rank 0
       only, and the group's other ranks wait for the next task.
@@ -135,6 +166,10 @@ class Solver:
     warm_up_parameters: Callable[[dict], dict]
     solve: Callable[[dict, np.random.Generator, "MPI.Comm"], TaskResult | None]
     decomposable: bool = False
+    tables: tuple["TableArray", ...] = ()
 
     def parameter(self, name: str) -> Parameter:
         return next(p for p in self.parameters if p.name == name)
+
+    def table(self, name: str) -> "TableArray":
+        return next(t for t in self.tables if t.name == name)

@@ -300,8 +300,8 @@ def folder_with_a_task(tmp_path) -> tuple[OutputFolder, Path]:
 def test_task_files_record_the_parsim_version_and_the_output_schema(tmp_path):
     _, path = folder_with_a_task(tmp_path)
     with h5py.File(path) as file:
-        assert file.attrs["parsim_version"] == parsim.__version__ == "0.2.0"
-        assert file.attrs["parsim_output_schema"] == OUTPUT_SCHEMA == 2
+        assert file.attrs["parsim_version"] == parsim.__version__ == "0.3.0"
+        assert file.attrs["parsim_output_schema"] == OUTPUT_SCHEMA == 3
     assert read_statistics(path) == {"box_length": 1.0}
 
 

@@ -54,6 +54,11 @@ profile_bins = 10
 shape = ["cube", "spiky"]
 shape_size = [2, 3]
 trial_angle = [0.001, 0.01]
+[[species]]
+name = "large"
+[[species]]
+name = "small"
+sphere_radius = 0.25
 """
 
 PNG_SIGNATURE, PDF_SIGNATURE = b"\x89PNG\r\n\x1a\n", b"%PDF"
@@ -62,7 +67,7 @@ PNG_SIGNATURE, PDF_SIGNATURE = b"\x89PNG\r\n\x1a\n", b"%PDF"
 def statistics(job, task) -> dict:
     """Plausible values of every statistic of a task: the figures need shapes, not physics."""
     solver = SOLVERS[job.kind]
-    observable = solver.coordinates(job.fixed)
+    observable = solver.coordinates(job.constants)
     rng = np.random.default_rng([task.point, task.realization])
     values = {s.name: rng.uniform(1.0, 2.0, tuple(len(observable[d].values) for d in s.dims))
               for s in all_statistics(solver)}
@@ -105,7 +110,8 @@ def write_outputs(root, job_text, configuration):
     write_dataset(build_dataset(job, SOLVERS[job.kind], lambda task: statistics(job, task), 1, 1), folder.dataset)
     rng = np.random.default_rng(0)
     for task in job.tasks()[:2]:
-        attrs = {**job.point_parameters(task.point), "point": task.point, "realization": task.realization}
+        attrs = {**job.point_parameters(task.point), **job.table_attributes, "point": task.point,
+                 "realization": task.realization}
         write_task_file(folder.task_path(task), TaskResult(statistics(job, task), configuration(rng)), attrs)
     return root
 
@@ -161,8 +167,9 @@ def test_plot_skips_figures_whose_variables_are_missing(deposition_output, tmp_p
     assert "skipped efficiency: the dataset lacks dimension 'shape_size'" in out
     assert "skipped packing_profile: the dataset lacks variable 'packing_profile'" in out
     assert "skipped sediment" in out and "holds none" in out
-    assert sorted(path.name for path in (tmp_path / "figures").iterdir()) == ["filling_height.pdf",
-                                                                              "filling_height.png"]
+    drawn = {"filling_height", "species_profiles", "long_axes", "radial_distribution"}
+    assert sorted(path.name for path in (tmp_path / "figures").iterdir()) == sorted(
+        f"{name}{suffix}" for name in drawn for suffix in (".pdf", ".png"))
 
 
 def test_one_figure_to_a_named_file(deposition_output, tmp_path):

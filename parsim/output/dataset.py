@@ -59,7 +59,7 @@ def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict
 
 def _statistics_variables(job: Job, solver: Solver, statistics_of: Callable[[Task], dict]) -> dict[str, xr.Variable]:
     """One variable per statistic, dimensions (sweep..., realization, observable...)."""
-    observable = solver.coordinates(job.fixed)
+    observable = solver.coordinates(job.constants)
     leading_shape = (*job.sweep_shape, job.realizations)
     statistics = all_statistics(solver)
     arrays = {s.name: np.empty(leading_shape + tuple(len(observable[d].values) for d in s.dims), dtype=s.dtype)
@@ -93,7 +93,7 @@ def _sweep_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
 def _observable_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
     return {name: _coordinate(name, coordinate.values,
                               {**_described(job, coordinate.units, coordinate.long_name), **coordinate.attrs})
-            for name, coordinate in solver.coordinates(job.fixed).items()}
+            for name, coordinate in solver.coordinates(job.constants).items()}
 
 
 def _fixed_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
@@ -146,6 +146,7 @@ def _global_attributes(job: Job, mpi_size: int, ranks_per_task: int) -> dict:
         "job_text": job.text,
         **job.unit_attributes,
         **job.input_attributes,
+        **job.table_attributes,
         "mpi_size": mpi_size,
         "ranks_per_task": ranks_per_task,
         "date_created": created,

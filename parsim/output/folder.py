@@ -114,7 +114,8 @@ def _identity(job: Job) -> dict[str, Any]:
     return {"name": job.name, "kind": job.kind, "seed": job.seed, "realizations": job.realizations,
             **{unit.key: job.units[unit.quantity] for unit in UNIT_KEYS},
             **{f"[parameters] {key}": value for key, value in job.fixed.items()},
-            **{f"[sweep] {key}": values for key, values in job.sweep.items()}}
+            **{f"[sweep] {key}": values for key, values in job.sweep.items()},
+            **{f"[[{key}]]": list(entries) for key, entries in job.tables.items()}}
 
 
 def _differences(then: Job, now: Job) -> list[str]:

@@ -123,9 +123,15 @@ def curves(variable: xr.DataArray, keep: tuple[str, ...]) -> list[Curve]:
                                           [variable.sizes[d] for d in colour_dims])) if colour_dims else 0
         style = {"color": f"C{colour % 10}",
                  "linestyle": LINE_STYLES[selection.get(LINE_STYLE_DIMENSION, 0) % len(LINE_STYLES)]}
-        label = ", ".join(f"{d} = {value_text(variable[d].values[i])}" for d, i in selection.items())
+        label = ", ".join(f"{d} = {coordinate_text(variable[d], i)}" for d, i in selection.items())
         result.append(Curve(selection, label or None, style))
     return result
+
+
+def coordinate_text(coordinate: xr.DataArray, index: int) -> str:
+    """Value ``index`` of a coordinate as a legend shows it: its name for a coded one (flag_meanings)."""
+    meanings = coordinate.attrs.get("flag_meanings")
+    return meanings.split()[index] if meanings else value_text(coordinate.values[index])
 
 
 def value_text(value) -> str:

@@ -39,17 +39,69 @@ def packing_profile(dataset: xr.Dataset) -> Figure:
     Ensemble mean with a band of one standard deviation, one curve per swept point (the
     bulk, 0.25 h to 0.75 h, is where ``bulk_packing_fraction`` is measured).
     """
-    variable = dataset.packing_profile
-    fig, (ax,) = new_figure(1)
-    height = variable["z_relative"]
-    for curve in curves(variable, keep=("z_relative",)):
-        mean, spread = ensemble(variable.isel(curve.selection))
-        ax.plot(mean, height, label=curve.label, **curve.style)
-        ax.fill_betweenx(height, mean - spread, mean + spread, color=curve.style["color"], alpha=BAND_ALPHA,
-                         linewidth=0)
-    ax.set(xlabel=axis_label(variable, r"packing fraction $\varphi$"), ylabel=axis_label(height, "$z / h$"))
-    legend(ax)
+    fig = _ensemble_curves(dataset.packing_profile, "z_relative", r"packing fraction $\varphi$", "$z / h$",
+                           vertical=True)
     return titled(fig, dataset, "packing fraction profile")
+
+
+def _several_species(dataset: xr.Dataset) -> list[str]:
+    return [] if dataset.sizes.get("species", 0) > 1 else ["a mixture: the job has one species"]
+
+
+@figure(FIGURES, "species_profiles", variables=("species_packing_profile",), check=_several_species)
+def species_profiles(dataset: xr.Dataset) -> Figure:
+    """Each species' packing fraction φ_s(z) against z / h: how a mixture or a stratified sediment is
+    built up, one curve per species (and swept point), with the total φ(z) of the deposited particles."""
+    fig = _ensemble_curves(dataset.species_packing_profile, "z_relative", r"packing fraction $\varphi_s$",
+                           "$z / h$", vertical=True)
+    return titled(fig, dataset, f"species profiles, segregation {float(dataset.segregation_index.mean()):.2f}")
+
+
+@figure(FIGURES, "long_axes", variables=("orientation_density",))
+def long_axes(dataset: xr.Dataset) -> Figure:
+    """Probability density of the angle θ between the bulk particles' long axes and the vertical,
+    against sin θ of isotropic orientations; the nematic order S and <P2(cos θ)> in the title."""
+    variable = dataset.orientation_density
+    fig = _ensemble_curves(variable, "angle_to_vertical", "probability density", r"angle $\theta$ to the vertical")
+    angle = np.linspace(0.0, 0.5 * np.pi, 200)
+    fig.axes[0].plot(angle, np.sin(angle), color="0.4", linestyle=":", label=r"isotropic, $\sin\theta$")
+    legend(fig.axes[0])
+    return titled(fig, dataset, f"long axes: S = {float(dataset.nematic_order.mean()):.2f}, "
+                                rf"$\langle P_2 \rangle$ = {float(dataset.vertical_order.mean()):.2f}")
+
+
+@figure(FIGURES, "radial_distribution", variables=("radial_distribution",))
+def radial_distribution(dataset: xr.Dataset) -> Figure:
+    """Radial distribution function g(r) of the bulk particles' centres of mass against r over the
+    mean volume-equivalent diameter; 1 is the ideal gas of the same density."""
+    fig = _ensemble_curves(dataset.radial_distribution, "r_relative", "$g(r)$", "$r / d$")
+    fig.axes[0].axhline(1.0, color="0.4", linestyle=":", linewidth=0.8)
+    return titled(fig, dataset, "g(r) of the centres of mass")
+
+
+def _ensemble_curves(variable: xr.DataArray, along: str, value_label: str, along_label: str,
+                     vertical: bool = False) -> Figure:
+    """One panel: ensemble mean of ``variable`` along ``along`` with a band of one standard
+    deviation, one curve per value of the other dimensions; ``vertical`` puts ``along`` upright."""
+    fig, (ax,) = new_figure(1)
+    coordinate = variable[along]
+    for curve in curves(variable, keep=(along,)):
+        mean, spread = ensemble(variable.isel(curve.selection))
+        if vertical:
+            ax.plot(mean, coordinate, label=curve.label, **curve.style)
+            ax.fill_betweenx(coordinate, mean - spread, mean + spread, color=curve.style["color"],
+                             alpha=BAND_ALPHA, linewidth=0)
+        else:
+            ax.plot(coordinate, mean, label=curve.label, **curve.style)
+            ax.fill_between(coordinate, mean - spread, mean + spread, color=curve.style["color"],
+                            alpha=BAND_ALPHA, linewidth=0)
+    value_text, along_text = axis_label(variable, value_label), axis_label(coordinate, along_label)
+    if vertical:
+        ax.set(xlabel=value_text, ylabel=along_text)
+    else:
+        ax.set(xlabel=along_text, ylabel=value_text)
+    legend(ax)
+    return fig
 
 
 @figure(FIGURES, "sediment", picture=True)

@@ -28,7 +28,7 @@ from parsim.core.ts import FORMULATIONS, DahaParameters, MinimiserFailure, simul
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import REQUIRED, Parameter
 from parsim.solver import (LENGTH_UNITS, MASS_UNITS, SPEED_UNITS, TIME_UNITS, Configuration, Coordinate, Solver,
-                           Statistic, TaskResult, flag_attributes)
+                           Statistic, TaskResult, coded_coordinate, flag_attributes)
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -191,9 +191,7 @@ def coordinates(fixed: dict) -> dict[str, Coordinate]:
     r_over_radius = pair_distribution_grid(1.0, fixed["pair_distribution_points"])
     levels = np.arange(1, fixed["box_levels"] + 1)
     return {
-        "component": Coordinate(np.arange(len(components), dtype=np.int8), "1",
-                                "Cartesian component (coded: flag_meanings names each flag_value)",
-                                attrs=flag_attributes(components)),
+        "component": coded_coordinate("Cartesian component", components),
         "r": Coordinate(r_over_radius, "1", "pair distance r in units of the sphere radius R"),
         "box_size": Coordinate(2.0 ** -levels, "1", "box side relative to the box length, eps_m / L = 2^-m"),
     }

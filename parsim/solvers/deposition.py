@@ -1,18 +1,19 @@
 """Sequential deposition of rigid multi-sphere particles (Topić & Pöschel 2016).
 
-One task: ``n_particles`` copies of one shape (each scaled by a factor from the size
-distribution, turned by a uniformly random rotation, released at a random horizontal
-position above the sediment) follow the steepest descent of their centre of mass with
-the event-driven algorithm of sections 3 and 4, then the sediment's statistics are
-measured: filling height 2 z_cm (section 4.1), bulk packing fraction and profile,
-coordination between particles, and the events of the special situations.
+One task: ``n_particles`` particles of one shape or of a mixture of species
+(:mod:`.deposition_materials`: each scaled by a factor from its size distribution, turned by
+a uniformly random rotation, released at a random horizontal position above the sediment)
+follow the steepest descent of their centre of mass with the event-driven algorithm of
+sections 3 and 4, in a periodic or walled box, a cylinder or on an open floor, onto the
+floor or a fixed substrate; then the sediment's statistics are measured
+(:mod:`.deposition_statistics`).
 
 The algorithm is sequential and not decomposable: with ``parsim run
 --ranks-per-task K > 1`` a task runs on its group's rank 0 while the other ranks
 of the group wait.
 """
 
-import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,28 +21,39 @@ import numpy as np
 from parsim.agglomerate_file import read_agglomerate
 from parsim.core import sdbd
 from parsim.core import shapes as shape_library
-from parsim.core.sediment import MAX_POINTS_PER_CAP, coordination, filling_height, packing_fractions
+from parsim.core.sediment import MAX_POINTS_PER_CAP
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import REQUIRED, Parameter
-from parsim.solver import LENGTH_UNITS, Configuration, Coordinate, Solver, Statistic, TaskResult
+from parsim.solver import LENGTH_UNITS, Configuration, Solver, TableArray, TaskResult
+from parsim.solvers import deposition_statistics as statistics
+from parsim.solvers.deposition_materials import (
+    SPECIES_KEYS,
+    Species,
+    check_species,
+    draw_particles,
+    particle_shape,
+    species_of,
+)
 
-SHAPES = ("sphere", "rod", "four_rods", "tripod", "spiky", "cube", "ellipsoid", "superellipsoid", "agglomerate")
+SHAPES = ("sphere", "rod", "four_rods", "tripod", "spiky", "cube", "ellipsoid", "superellipsoid", "agglomerate",
+          "mesh")
+CONTAINERS = ("box", "cylinder")
 LATERAL = {"periodic": sdbd.LATERAL_PERIODIC, "walls": sdbd.LATERAL_WALLS, "none": sdbd.LATERAL_NONE}
 FLOOR = {"stop": sdbd.FLOOR_STOP, "roll": sdbd.FLOOR_ROLL}
 WALL_CONTACTS = {"frictionless": sdbd.WALL_FRICTIONLESS, "glued": sdbd.WALL_GLUED}
-SIZE_DISTRIBUTIONS = ("monodisperse", "uniform", "lognormal")
+SIZE_DISTRIBUTIONS = ("monodisperse", "uniform", "lognormal", "sieve")
 SMOOTH_SHAPES = ("ellipsoid", "superellipsoid")
 SIZE_KEYS = {"rod": "shape_size", "four_rods": "shape_size", "tripod": "shape_size", "spiky": "shape_size",
              "cube": "shape_size", "ellipsoid": "shape_spheres", "superellipsoid": "shape_spheres",
-             "agglomerate": "agglomerate_file"}  # the parameter that sets how many spheres a particle has
+             "agglomerate": "agglomerate_file", "mesh": "mesh_spheres"}  # sets how many spheres a particle has
 BYTES_PER_PARTICLE = 512  # the terms of one task's memory estimate, see memory()
 BYTES_PER_SEDIMENT_SPHERE = 128
 BYTES_PER_SMOOTH_SHAPE_SPHERE = 3072
 BYTES_PER_CAP_POINT = 48
-BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the filling height, away from floor and surface
+CYLINDER_FLATNESS = 0.01  # automatic container_sides: the polygon departs from the circle by at most this
+# times the smallest sphere radius
 WARM_UP_PARTICLES = 4  # particles of the warm-up run, which compiles the kernels before any task
 WARM_UP_PACKING_SAMPLES = 1000  # the fewest allowed
-PROFILE_TOP = 1.25  # the profile phi(z) covers 0 <= z <= PROFILE_TOP x filling height
 
 @dataclass(frozen=True)
 class _ReadWhen:
@@ -55,15 +67,63 @@ class _ReadWhen:
         return params[self.key] in self.values
 
 
+@dataclass(frozen=True)
+class _ReadWhenAll:
+    """Read when every one of ``conditions`` holds."""
+
+    conditions: tuple
+
+    def __call__(self, params: dict) -> bool:
+        return all(condition(params) for condition in self.conditions)
+
+
+@dataclass(frozen=True)
+class _ReadWhenAny:
+    """Read when one of ``conditions`` holds."""
+
+    conditions: tuple
+
+    def __call__(self, params: dict) -> bool:
+        return any(condition(params) for condition in self.conditions)
+
+
+@dataclass(frozen=True)
+class _ReadBySpecies:
+    """A species key given for the job is read when a species takes it (its entry does not set
+    ``key``) and reads it (``condition`` of the species' own parameters; None: always)."""
+
+    key: str
+    condition: object = None
+
+    def __call__(self, params: dict) -> bool:
+        entries = params.get("species") or ({},)
+        return any(self.key not in entry and (self.condition is None or self.condition({**params, **entry}))
+                   for entry in entries)
+
+
+@dataclass(frozen=True)
+class _HasTable:
+    """Read when the job holds the array of tables ``name``."""
+
+    name: str
+
+    def __call__(self, params: dict) -> bool:
+        return bool(params.get(self.name))
+
+
 _SIZED_SHAPES = _ReadWhen("shape", tuple(SIZE_KEYS))
 _CHAINS = _ReadWhen("shape", ("rod", "four_rods", "tripod"))
 _SMOOTH = _ReadWhen("shape", SMOOTH_SHAPES)
 _SUPERELLIPSOID = _ReadWhen("shape", ("superellipsoid",))
 _AGGLOMERATE = _ReadWhen("shape", ("agglomerate",))
-_BOXED = _ReadWhen("lateral", ("periodic", "walls"))
-_WALLED = _ReadWhen("lateral", ("walls",))
-_HEAP = _ReadWhen("lateral", ("none",))
+_MESH = _ReadWhen("shape", ("mesh",))
+_IN_BOX = _ReadWhen("container", ("box",))
+_CYLINDER = _ReadWhen("container", ("cylinder",))
+_BOXED = _ReadWhenAll((_IN_BOX, _ReadWhen("lateral", ("periodic", "walls"))))
+_WALLED = _ReadWhenAny((_CYLINDER, _ReadWhenAll((_IN_BOX, _ReadWhen("lateral", ("walls",))))))
+_HEAP = _ReadWhenAll((_IN_BOX, _ReadWhen("lateral", ("none",))))
 _SPREAD = _ReadWhen("size_distribution", ("uniform", "lognormal"))
+_SIEVE = _ReadWhen("size_distribution", ("sieve",))
 
 PARAMETERS = (
     Parameter("n_particles", int, REQUIRED, "1", "number of particles deposited", low=1),
@@ -72,8 +132,8 @@ PARAMETERS = (
               "shape_size spheres sharing the centre one, Fig. 1b); tripod (three legs of shape_size spheres); "
               "spiky (3L-2 spheres on three perpendicular axes, section 5); cube (6L^2-12L+8 spheres on the "
               "surface of an LxLxL cube, section 5); ellipsoid, superellipsoid (shape_spheres overlapping "
-              "polydisperse spheres, Fig. 1d-f); agglomerate (the spheres of agglomerate_file)",
-              choices=SHAPES),
+              "polydisperse spheres, Fig. 1d-f); agglomerate (the spheres of agglomerate_file); mesh (mesh_spheres "
+              "medial balls of the closed surface mesh mesh_file)", choices=SHAPES),
     Parameter("shape_size", int, 5, "1", "L of spiky and cube; spheres of a rod, of each arm of four_rods, "
               "of each leg of a tripod", low=1, read_when=_SIZED_SHAPES),
     Parameter("shape_spacing", float, 1.0, "1", "centre distance of neighbouring spheres in rod, four_rods "
@@ -94,14 +154,33 @@ PARAMETERS = (
     Parameter("agglomerate_file", str, "", "1", "CSV (x, y, z, r) or HDF5 (spheres/position, spheres/radius, e.g. "
               "an aggregation task file) holding the agglomerate; it is rescaled to mean radius sphere_radius",
               is_file=True, read_when=_AGGLOMERATE),
+    Parameter("mesh_file", str, "", "1", "closed triangle mesh (STL or OBJ) of the particle: approximated by "
+              "mesh_spheres overlapping medial balls and scaled to the volume of a sphere of radius sphere_radius",
+              is_file=True, read_when=_MESH),
+    Parameter("mesh_spheres", int, 100, "1", "number of medial balls approximating mesh_file (the approximation's "
+              "volume error and surface distance are recorded per species)", low=1, read_when=_MESH),
     Parameter("sphere_radius", float, 0.5, LENGTH_UNITS, "radius of the particles' spheres (the default 0.5 "
               "makes lengths count sphere diameters); shape lengths are in units of it",
               low=0.0, low_inclusive=False),
+    Parameter("container", str, "box", "1", "box (lateral boundaries set by lateral) or cylinder (a vertical "
+              "cylinder of container_radius about (container_radius, container_radius), its wall frictionless or "
+              "glued as wall_contact says)", choices=CONTAINERS),
     Parameter("box_length", float, 50.0, LENGTH_UNITS, "side of the square bottom [0, box_length]^2 "
               "(periodic or walled)", low=0.0, low_inclusive=False, read_when=_BOXED),
-    Parameter("lateral", str, "periodic", "1", "lateral boundaries: periodic, walls (four rigid vertical walls, "
-              "see wall_contact), none (a heap on an unbounded floor)", choices=tuple(LATERAL)),
-    Parameter("wall_contact", str, "frictionless", "1", "wall contact model of lateral = walls: frictionless "
+    Parameter("lateral", str, "periodic", "1", "lateral boundaries of the box: periodic, walls (four rigid vertical "
+              "walls, see wall_contact), none (a heap on an unbounded floor)", choices=tuple(LATERAL),
+              read_when=_IN_BOX),
+    Parameter("container_radius", float, 10.0, LENGTH_UNITS, "radius of the cylinder", low=0.0,
+              low_inclusive=False, read_when=_CYLINDER),
+    Parameter("container_sides", int, 0, "1", "the cylinder's wall is the regular polygon of this many flat sides "
+              "inscribed in its circle (the exact motions of the method exist for flat walls only); 0: the fewest "
+              "sides with which it departs from the circle by at most 1 % of the smallest sphere radius",
+              low=0, read_when=_CYLINDER),
+    Parameter("substrate", str, "", "1", "fixed spheres the particles are deposited onto: CSV (x, y, z, r) or HDF5 "
+              "(spheres/position, spheres/radius, e.g. a deposition task file, whose own substrate is included); "
+              "\"\": the bare floor", is_file=True),
+    Parameter("wall_contact", str, "frictionless", "1", "wall contact model of the walls and the cylinder: "
+              "frictionless "
               "(a sphere of infinite radius: the wall pushes only along its normal and a touching sphere slides "
               "along it) or glued (the wall holds the touching sphere's centre: it pivots about it, no sliding)",
               choices=tuple(WALL_CONTACTS), affects_seed=False, read_when=_WALLED),
@@ -110,9 +189,15 @@ PARAMETERS = (
     Parameter("drop_radius", float, 5.0, LENGTH_UNITS, "with lateral = none: particles are released uniformly "
               "over the disc of this radius around the origin", low=0.0, low_inclusive=False, read_when=_HEAP),
     Parameter("size_distribution", str, "monodisperse", "1", "particle size factor: monodisperse (1), uniform "
-              "(in [1 - size_spread, 1 + size_spread]) or lognormal (exp(size_spread Z), Z standard normal)",
-              choices=SIZE_DISTRIBUTIONS),
+              "(in [1 - size_spread, 1 + size_spread]), lognormal (exp(size_spread Z), Z standard normal) or sieve "
+              "(the volume-equivalent diameter drawn from the sieve curve sieve_curve)", choices=SIZE_DISTRIBUTIONS),
     Parameter("size_spread", float, 0.1, "1", "width of the size distribution", low=0.0, read_when=_SPREAD),
+    Parameter("sieve_curve", str, "", "1", "CSV file of the sieve curve: sieve size (a length), cumulative percent "
+              "passing; interpolated linearly in log size", is_file=True, read_when=_SIEVE),
+    Parameter("sieve_basis", str, "mass", "1", "what the sieve curve's percentages count: mass (a grading curve) "
+              "or number", choices=("mass", "number"), read_when=_SIEVE),
+    Parameter("share_basis", str, "number", "1", "what the species' share values count: number of particles or "
+              "volume of material", choices=("number", "volume"), read_when=_HasTable("species")),
     Parameter("trial_angle", float, 1e-2, "rad", "trial rotation Delta phi of frustrated situations (section 4.1)",
               low=0.0, high=np.pi, low_inclusive=False, high_inclusive=False),
     Parameter("cycle_n", int, 4, "1", "n of the cycling criterion (34), section 4.2 (0: off)", low=0, high=28),
@@ -125,59 +210,71 @@ PARAMETERS = (
               "spheres within a particle (sphere volumes are exact; measured error below 1e-4)", low=1000),
     Parameter("timing_skip_fraction", float, 0.5, "1", "fraction of the particles, deposited first, left out "
               "of spheres_per_second (section 5: the first half)", low=0.0, high=1.0, high_inclusive=False),
+    *statistics.PARAMETERS,
 )
-
-STATISTICS = (
-    Statistic("filling_height", LENGTH_UNITS, "filling height 2 z_cm, particles weighted by volume (section 4.1)"),
-    Statistic("bulk_packing_fraction", "1", "packing fraction between 0.25 and 0.75 of the filling height "
-              "(NaN without lateral boundaries)"),
-    Statistic("packing_profile", "1", "packing fraction phi(z) of horizontal slabs (NaN without lateral "
-              "boundaries)", dims=("z_relative",)),
-    Statistic("bulk_coordination", "1", "mean number of sphere-sphere contacts with other particles, per "
-              "particle with its centre of mass in the bulk slab"),
-    Statistic("n_bulk_particles", "1", "particles in the bulk slab", dtype="int64"),
-    Statistic("n_spheres", "1", "spheres in the sediment", dtype="int64"),
-    Statistic("events_per_particle", "1", "mean number of events per particle"),
-    Statistic("largest_steps_per_particle", "1", "the most decide-and-move steps one particle needed (bounded "
-              "by max_events_per_particle)", dtype="int64"),
-    Statistic("frustrated_steps", "1", "trial rotations of frustrated situations (section 4.1)", dtype="int64"),
-    Statistic("cycling_interruptions", "1", "interruptions of infinite cycling (section 4.2)", dtype="int64"),
-    Statistic("simultaneous_events", "1", "simultaneous events (section 4.3)", dtype="int64"),
-    Statistic("hanging_particles", "1", "particles hanging on one or two contacts", dtype="int64"),
-    Statistic("particles_on_floor", "1", "particles resting on the floor", dtype="int64"),
-    Statistic("spheres_per_second", "s-1", "spheres deposited per wall-clock second, first "
-              "timing_skip_fraction of the particles left out (section 5)", measured=True),
-)
-
-STATE_COUNTS = {"hanging_particles": (sdbd.HANGING_ONE, sdbd.HANGING_TWO), "particles_on_floor": (sdbd.RESTING_ON_FLOOR,)}
-EVENT_TOTALS = {"frustrated_steps": "frustrated_trial_rotation", "cycling_interruptions": "cycling_interruption",
-                "simultaneous_events": "simultaneous"}
-
+# a key a species may set is read for the job when some species takes the job's value
+PARAMETERS = tuple(Parameter(**{**vars(p), "read_when": _ReadBySpecies(p.name, p.read_when)})
+                   if p.name in SPECIES_KEYS else p for p in PARAMETERS)
+SPECIES_TABLE = TableArray(
+    "species", "the species of a mixture: each entry a shape with its own parameters and size distribution "
+    "(any of " + ", ".join(SPECIES_KEYS) + "; the others are the job's) and its share",
+    (Parameter("name", str, REQUIRED, "1", "the species' name (the dataset's species coordinate)"),
+     Parameter("share", float, 1.0, "1", "share of the mixture, by share_basis; shares are normalised", low=0.0,
+               low_inclusive=False),
+     *(p for p in PARAMETERS if p.name in SPECIES_KEYS)),
+    required=("name",))
+LAYERS_TABLE = TableArray(
+    "layers", "layers deposited one after the other in one task: n_particles of the species named",
+    (Parameter("n_particles", int, REQUIRED, "1", "particles of the layer", low=1),
+     Parameter("species", str, "", "1", "the species of the layer: names of [[species]] separated by commas, "
+               "drawn by their shares; \"\": all species")),
+    required=("n_particles",))
 
 def check(params: dict) -> None:
-    if params["shape"] == "agglomerate":
-        particle_shape(params)  # reads and checks the file
-    if params["size_distribution"] == "uniform" and not params["size_spread"] < 1.0:
-        raise JobError(f"size_spread = {params['size_spread']} with size_distribution = 'uniform': allowed: "
-                       "0 <= size_spread < 1 (factors must stay positive)")
-    if params["lateral"] != "none":
-        offsets, radii, _ = particle_shape(params)
-        extent = shape_library.bounding_radius(offsets, radii) * _largest_size_factor(params)
-        if not params["box_length"] > 2.0 * extent:
-            raise JobError(f"box_length = {params['box_length']} must exceed twice the particle extent "
-                           f"(2 x {extent:.6g}), so that a particle fits in the box; allowed: box_length > "
-                           f"{2 * extent:.6g}")
+    """The checks across keys of one point: species, layers, sieve curves, substrate, and that a particle fits."""
+    check_species(params)
+    species = species_of(params)
+    extent = max(s.extent * s.largest_scale() for s in species)
+    if params["container"] == "cylinder":
+        radius = params["container_radius"]
+        inscribed = radius * math.cos(math.pi / container_sides(params, species))
+        if not inscribed > extent:
+            raise JobError(f"container_radius = {radius} must exceed the largest particle extent {extent:.6g} "
+                           f"(and the polygon's inscribed radius {inscribed:.6g} too), so that a particle fits in "
+                           f"the cylinder; allowed: container_radius > {extent / inscribed * radius:.6g}")
+        if 0 < params["container_sides"] < sdbd.MIN_CYLINDER_SIDES:
+            raise JobError(f"container_sides = {params['container_sides']}: allowed: 0 (automatic) or at least "
+                           f"{sdbd.MIN_CYLINDER_SIDES}")
+    elif params["lateral"] != "none" and not params["box_length"] > 2.0 * extent:
+        raise JobError(f"box_length = {params['box_length']} must exceed twice the particle extent "
+                       f"(2 x {extent:.6g}), so that a particle fits in the box; allowed: box_length > "
+                       f"{2 * extent:.6g}")
+    if params["substrate"]:
+        substrate_spheres(params)  # reads and checks the file
 
 
-def coordinates(fixed: dict) -> dict[str, Coordinate]:
-    bins = fixed["profile_bins"]
-    edges = np.linspace(0.0, PROFILE_TOP, bins + 1)
-    return {"z_relative": Coordinate(0.5 * (edges[1:] + edges[:-1]), "1", "height of the slab centre over the "
-                                     "filling height, z / h")}
+def container_sides(params: dict, species: tuple[Species, ...]) -> int:
+    """Sides of the cylinder's polygon: ``container_sides``, or the fewest with which the polygon
+    departs from the circle, R (1 - cos(pi / n)), by at most CYLINDER_FLATNESS of the smallest sphere radius."""
+    if params["container_sides"]:
+        return params["container_sides"]
+    smallest = min(float(s.radii.min()) for s in species)
+    depth = CYLINDER_FLATNESS * smallest / params["container_radius"]
+    return max(sdbd.MIN_CYLINDER_SIDES, math.ceil(math.pi / math.acos(1.0 - min(depth, 1.0))))
+
+
+def substrate_spheres(params: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (m, 3) and radii (m,) of the substrate (empty without one)."""
+    if not params["substrate"]:
+        return np.zeros((0, 3)), np.zeros(0)
+    centres, radii = read_agglomerate(params["substrate"], key="substrate", with_substrate=True)
+    if centres.shape[1] != 3:
+        raise JobError(f"substrate = {params['substrate']!r}: spheres in a plane (x, y, r); allowed: x, y, z, r")
+    return centres, radii
 
 
 def cost(params: dict) -> float:
-    return float(params["n_particles"]) * len(particle_shape(params)[1])
+    return float(params["n_particles"]) * _spheres_per_particle(params)
 
 
 def memory(params: dict) -> int:
@@ -194,12 +291,12 @@ def memory(params: dict) -> int:
       fraction: one cap's points are held at a time, at most ``MAX_POINTS_PER_CAP`` of them
       (about 3 MiB).
 
-    Measured peaks: 0.37 KiB per particle of one sphere, 95 B per sediment sphere of cubes
-    (L = 3), 2.4 KiB per sphere of an ellipsoid of 8000 spheres, 48 B per cap point (rods of
-    five overlapping spheres, tracemalloc).
+    A mixture counts its largest species.  Measured peaks: 0.37 KiB per particle of one sphere,
+    95 B per sediment sphere of cubes (L = 3), 2.4 KiB per sphere of an ellipsoid of 8000 spheres,
+    48 B per cap point (rods of five overlapping spheres, tracemalloc).
     """
     spheres = _spheres_per_particle(params)
-    build = BYTES_PER_SMOOTH_SHAPE_SPHERE * spheres if params["shape"] in SMOOTH_SHAPES else 0
+    build = BYTES_PER_SMOOTH_SHAPE_SPHERE * spheres if _shapes(params) & set(SMOOTH_SHAPES) else 0
     sediment = params["n_particles"] * (BYTES_PER_PARTICLE + BYTES_PER_SEDIMENT_SPHERE * spheres)
     cap_points = min(MAX_POINTS_PER_CAP, params["packing_samples"] * (params["profile_bins"] + 1))
     return build + sediment + BYTES_PER_CAP_POINT * cap_points
@@ -212,14 +309,24 @@ def memory_keys(params: dict) -> tuple[str, ...]:
 
 def warm_up_parameters(params: dict) -> dict:
     """The point with a few particles and the fewest packing samples: the same kernels in milliseconds."""
-    return {**params, "n_particles": min(params["n_particles"], WARM_UP_PARTICLES),
-            "packing_samples": WARM_UP_PACKING_SAMPLES}
+    few = min(params["n_particles"], WARM_UP_PARTICLES)
+    layers = params.get("layers")
+    return {**params, "n_particles": few, "packing_samples": WARM_UP_PACKING_SAMPLES,
+            **({"layers": ({"n_particles": few},)} if layers else {})}
+
+
+def _shapes(params: dict) -> set[str]:
+    return {entry.get("shape", params["shape"]) for entry in params.get("species") or ({},)}
 
 
 def _spheres_per_particle(params: dict) -> int:
-    """Spheres of one particle, counted without building it (an agglomerate's file is read)."""
+    """Spheres of the largest particle of the mixture, counted without building it where possible."""
+    return max(_spheres_of({**params, **entry}) for entry in params.get("species") or ({},))
+
+
+def _spheres_of(params: dict) -> int:
     shape, size = params["shape"], params["shape_size"]
-    if shape == "agglomerate":
+    if shape in ("agglomerate", "mesh"):
         return len(particle_shape(params)[1])
     if shape in SMOOTH_SHAPES:
         return params["shape_spheres"]  # at most: medial balls that add nothing are dropped
@@ -229,166 +336,126 @@ def _spheres_per_particle(params: dict) -> int:
 
 def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
     """One task; serial, so ``comm`` (a group of one, see :class:`parsim.solver.Solver`) is not used."""
-    offsets, radii, volume = particle_shape(params)
+    species = species_of(params)
     n = params["n_particles"]
-    # sizes, orientations and drop points each from their own stream: the first k particles of a
-    # task are those of the same task with n_particles = k, and so is their sediment
+    # sizes, orientations and drop points each from their own stream, the species from a fourth:
+    # the first k particles of a task are those of the same task with n_particles = k, and so is
+    # their sediment
     size_rng, rotation_rng, drop_rng = rng.spawn(3)
-    scale = _size_factors(params, size_rng)
+    species_rng = rng.spawn(1)[0]
+    drops = draw_particles(params, species, species_rng, size_rng)
     rotation = shape_library.random_rotations(n, rotation_rng)
-    drop_xy = _drop_positions(params, offsets, radii, scale, drop_rng)
-    lower, upper = np.zeros(2), np.full(2, params["box_length"])  # unused with lateral = none
+    geometry = _container(params, species)
+    drop_xy = _drop_positions(params, geometry, species, drops, drop_rng)
+    substrate = substrate_spheres(params)
     skip = int(params["timing_skip_fraction"] * n)
-    result = sdbd.deposit(offsets, radii, np.array([0, len(radii)]), np.zeros(n, dtype=np.int64), scale, rotation,
-                          drop_xy, lower, upper, LATERAL[params["lateral"]], FLOOR[params["floor"]],
-                          wall_contact=WALL_CONTACTS[params["wall_contact"]], trial_angle=params["trial_angle"],
-                          cycle_n=params["cycle_n"], cycle_eps=params["cycle_eps"],
+    start = np.cumsum([0, *(len(s.radii) for s in species)])
+    result = sdbd.deposit(np.concatenate([s.offsets for s in species]), np.concatenate([s.radii for s in species]),
+                          start, drops.species, drops.scale, rotation, drop_xy, geometry.lower, geometry.upper,
+                          geometry.lateral, FLOOR[params["floor"]], wall_contact=WALL_CONTACTS[params["wall_contact"]],
+                          trial_angle=params["trial_angle"], cycle_n=params["cycle_n"], cycle_eps=params["cycle_eps"],
                           max_events_per_particle=params["max_events_per_particle"],
-                          clock_from_particle=skip if skip < n else -1)
+                          clock_from_particle=skip if skip < n else -1, container=geometry.container,
+                          cylinder=geometry.cylinder, substrate_positions=substrate[0] if len(substrate[1]) else None,
+                          substrate_radii=substrate[1] if len(substrate[1]) else None)
     if result.stopped_at >= 0:
         raise NumericalError(f"particle {result.stopped_at} (of {n}) needed more than max_events_per_particle = "
                              f"{params['max_events_per_particle']} events; raise the limit or check the shape")
     if not np.all(np.isfinite(result.positions)):
         raise NumericalError("non-finite sphere positions in the sediment")
-    return TaskResult(_statistics(params, result, volume * scale**3, skip), _configuration(params, result, scale))
+    region = _measuring_region(params, geometry, result)
+    return TaskResult(statistics.measure(params, result, species, drops, region, skip, substrate),
+                      _configuration(params, geometry, result, species, drops, substrate))
 
 
-def _statistics(params, result, particle_volume, skip) -> dict:
-    height = filling_height(result.center_of_mass[:, 2], particle_volume)
-    slab = (BULK_SLAB[0] * height, BULK_SLAB[1] * height)
-    lower, upper = _measuring_box(params, result)
-    bins = params["profile_bins"]
-    if params["lateral"] == "none":
-        bulk_phi, profile = np.nan, np.full(bins, np.nan)
-    else:
-        edges = np.linspace(0.0, PROFILE_TOP * height, bins + 1)
-        # the bulk slab and the profile's slabs in one pass over the spheres
-        fractions = packing_fractions(result.positions, result.radii, lower, upper,
-                                      [slab, *zip(edges[:-1], edges[1:])], samples=params["packing_samples"])
-        bulk_phi, profile = float(fractions[0]), fractions[1:]
-    bulk_z, n_bulk = coordination(result.positions, result.radii, result.particle, result.center_of_mass[:, 2],
-                                  lower, upper, *slab)
-    counted_spheres = int(np.sum(result.particle >= skip))
-    statistics = {
-        "filling_height": height,
-        "bulk_packing_fraction": bulk_phi,
-        "packing_profile": profile,
-        "bulk_coordination": bulk_z,
-        "n_bulk_particles": n_bulk,
-        "n_spheres": len(result.radii),
-        "events_per_particle": float(result.event_counts.sum(axis=1).mean()),
-        "largest_steps_per_particle": int(result.steps.max()),
-        "spheres_per_second": counted_spheres / result.clocked_seconds if result.clocked_seconds > 0 else np.nan,
-    }
-    for name, kind in EVENT_TOTALS.items():
-        statistics[name] = int(result.event_counts[:, sdbd.EVENT_KINDS.index(kind)].sum())
-    for name, states in STATE_COUNTS.items():
-        statistics[name] = int(np.isin(result.state, states).sum())
-    return statistics
+@dataclass(frozen=True)
+class _Geometry:
+    """The container as the kernel takes it."""
+
+    container: int
+    lateral: int
+    lower: np.ndarray  # the lateral box (the cylinder's bounding square)
+    upper: np.ndarray
+    cylinder: tuple | None = None  # (cx, cy, R, sides)
 
 
-def _configuration(params, result, scale) -> Configuration:
-    top = float(np.max(result.positions[:, 2] + result.radii))
-    periodic = params["lateral"] == "periodic"
-    if params["lateral"] == "none":  # the heap's extent
-        lower = (result.positions[:, :2] - result.radii[:, None]).min(axis=0)
-        upper = (result.positions[:, :2] + result.radii[:, None]).max(axis=0)
-    else:
-        lower, upper = np.zeros(2), np.full(2, params["box_length"])
-    return Configuration(
-        arrays={"spheres/position": result.positions, "spheres/radius": result.radii,
-                "spheres/particle": result.particle,
-                "particles/center_of_mass": result.center_of_mass, "particles/rotation": result.rotation,
-                "particles/shape": np.zeros(len(scale), dtype=np.int64), "particles/scale": scale,
-                "particles/state": result.state, "particles/contacts": result.contacts,
-                "particles/event_counts": result.event_counts, "particles/steps": result.steps},
-        box_lower=np.array([lower[0], lower[1], 0.0]), box_upper=np.array([upper[0], upper[1], top]),
-        periodic=np.array([periodic, periodic, False]),
-        attrs={"floor_z": 0.0, "event_kinds": list(sdbd.EVENT_KINDS), "state_names": list(sdbd.STATE_NAMES),
-               "shape_names": [params["shape"]]})
+def _container(params, species) -> _Geometry:
+    if params["container"] == "cylinder":
+        radius = params["container_radius"]
+        return _Geometry(sdbd.CONTAINER_CYLINDER, sdbd.LATERAL_WALLS, np.zeros(2), np.full(2, 2.0 * radius),
+                         (radius, radius, radius, container_sides(params, species)))
+    return _Geometry(sdbd.CONTAINER_BOX, LATERAL[params["lateral"]], np.zeros(2), np.full(2, params["box_length"]))
 
 
-def particle_shape(params: dict) -> tuple[np.ndarray, np.ndarray, float]:
-    """Offsets and radii of the particle (in length units, about its centre of mass) and its volume."""
-    if params["shape"] == "agglomerate" and not params["agglomerate_file"]:
-        raise JobError("shape = 'agglomerate' needs agglomerate_file (a CSV or HDF5 file of spheres)")
-    return _built_shape(params["shape"], params["shape_size"], params["shape_spacing"],
-                        (params["semi_axis_x"], params["semi_axis_y"], params["semi_axis_z"]),
-                        (params["exponent_vertical"], params["exponent_horizontal"]), params["shape_spheres"],
-                        params["agglomerate_file"], params["sphere_radius"])
-
-
-@functools.lru_cache(maxsize=8)
-def _built_shape(shape, size, spacing, semi_axes, exponents, n_spheres, agglomerate_file, sphere_radius):
-    """Build once per process: the smooth bodies take seconds for thousands of spheres."""
-    if shape == "sphere":
-        offsets, radii = shape_library.sphere()
-    elif shape == "rod":
-        offsets, radii = shape_library.rod(size, spacing=spacing)
-    elif shape == "four_rods":
-        offsets, radii = shape_library.four_rods(size, spacing=spacing)
-    elif shape == "tripod":
-        offsets, radii = shape_library.tripod(size, spacing=spacing)
-    elif shape == "spiky":
-        offsets, radii = shape_library.spiky(size)
-    elif shape == "cube":
-        offsets, radii = shape_library.cube(size)
-    elif shape == "ellipsoid":
-        offsets, radii = shape_library.ellipsoid(semi_axes, n_spheres)
-    elif shape == "superellipsoid":
-        offsets, radii = shape_library.superellipsoid(semi_axes, exponents, n_spheres)
-    else:
-        centres, file_radii = read_agglomerate(agglomerate_file)
-        offsets, radii = shape_library.agglomerate(centres / file_radii.mean(), file_radii / file_radii.mean())
-    offsets, radii = offsets * sphere_radius, radii * sphere_radius
-    _, volume = shape_library.centre_of_mass_of_union(offsets, radii)
-    offsets.setflags(write=False)
-    radii.setflags(write=False)
-    return offsets, radii, float(volume)
-
-
-def _size_factors(params, rng) -> np.ndarray:
-    n, spread = params["n_particles"], params["size_spread"]
-    if params["size_distribution"] == "uniform":
-        return rng.uniform(1.0 - spread, 1.0 + spread, n)
-    if params["size_distribution"] == "lognormal":
-        return np.exp(spread * rng.standard_normal(n))
-    return np.ones(n)
-
-
-def _largest_size_factor(params) -> float:
-    if params["size_distribution"] == "uniform":
-        return 1.0 + params["size_spread"]
-    if params["size_distribution"] == "lognormal":
-        return float(np.exp(6.0 * params["size_spread"]))  # 6 standard deviations: never reached in practice
-    return 1.0
-
-
-def _drop_positions(params, offsets, radii, scale, rng):
+def _drop_positions(params, geometry, species, drops, rng):
     """Horizontal release positions of the centres of mass."""
-    n, length = params["n_particles"], params["box_length"]
+    n = params["n_particles"]
+    extents = np.array([s.extent for s in species])
+    if geometry.cylinder is not None:  # the whole particle starts inside the polygon, whatever its orientation
+        cx, cy, radius, sides = geometry.cylinder
+        reach = radius * math.cos(math.pi / sides) - extents[drops.species] * drops.scale
+        if np.any(reach <= 0.0):
+            raise NumericalError(f"a particle of size factor {drops.scale.max():.4g} does not fit in the cylinder")
+        return _on_disc(rng.random((n, 2)), reach, (cx, cy))
     if params["lateral"] == "none":
-        u = rng.random((n, 2))  # one row per particle
-        radius = params["drop_radius"] * np.sqrt(u[:, 0])  # uniform over the disc
-        angle = 2.0 * np.pi * u[:, 1]
-        return np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+        return _on_disc(rng.random((n, 2)), params["drop_radius"], (0.0, 0.0))
+    length = params["box_length"]
     if params["lateral"] == "walls":  # the whole particle starts inside, whatever its orientation
-        margin = shape_library.bounding_radius(offsets, radii) * scale[:, None]
+        margin = (extents[drops.species] * drops.scale)[:, None]
         if np.any(2.0 * margin >= length):
-            raise NumericalError(f"a particle of size factor {scale.max():.4g} does not fit between the walls")
+            raise NumericalError(f"a particle of size factor {drops.scale.max():.4g} does not fit between the walls")
         return margin + rng.random((n, 2)) * (length - 2.0 * margin)
     return rng.random((n, 2)) * length
 
 
-def _measuring_box(params, result):
+def _on_disc(uniform, radius, centre):
+    """Points uniform over discs of ``radius`` about ``centre`` from uniform pairs (one row per point)."""
+    distance = radius * np.sqrt(uniform[:, 0])
+    angle = 2.0 * np.pi * uniform[:, 1]
+    return np.column_stack([centre[0] + distance * np.cos(angle), centre[1] + distance * np.sin(angle)])
+
+
+def _measuring_region(params, geometry, result) -> statistics.Region:
     """The horizontal box over which packing and contacts are measured."""
+    if geometry.cylinder is not None:
+        _, _, radius, sides = geometry.cylinder
+        polygon = 0.5 * sides * radius**2 * math.sin(2.0 * math.pi / sides)
+        return statistics.Region(geometry.lower, geometry.upper, False, True, polygon / (2.0 * radius) ** 2)
     if params["lateral"] != "none":
-        return np.zeros(2), np.full(2, params["box_length"])
+        return statistics.Region(geometry.lower, geometry.upper, params["lateral"] == "periodic", True)
     reach = 2.0 * result.radii.max()  # so that periodic wrapping of the measurement meets no sphere twice
-    return (result.positions[:, :2].min(axis=0) - 2.0 * reach, result.positions[:, :2].max(axis=0) + 2.0 * reach)
+    return statistics.Region(result.positions[:, :2].min(axis=0) - 2.0 * reach,
+                             result.positions[:, :2].max(axis=0) + 2.0 * reach, False, False)
+
+
+def _configuration(params, geometry, result, species, drops, substrate) -> Configuration:
+    top = float(np.max(result.positions[:, 2] + result.radii))
+    periodic = geometry.cylinder is None and params["lateral"] == "periodic"
+    if geometry.cylinder is None and params["lateral"] == "none":  # the heap's extent
+        lower = (result.positions[:, :2] - result.radii[:, None]).min(axis=0)
+        upper = (result.positions[:, :2] + result.radii[:, None]).max(axis=0)
+    else:
+        lower, upper = geometry.lower, geometry.upper
+    attrs = {"floor_z": 0.0, "event_kinds": list(sdbd.EVENT_KINDS), "state_names": list(sdbd.STATE_NAMES),
+             "shape_names": [s.name for s in species], "container": params["container"]}
+    if geometry.cylinder is not None:
+        attrs["cylinder"] = list(geometry.cylinder)  # centre x, y, radius, sides of the polygon
+    return Configuration(
+        arrays={"spheres/position": result.positions, "spheres/radius": result.radii,
+                "spheres/particle": result.particle,
+                "particles/center_of_mass": result.center_of_mass, "particles/rotation": result.rotation,
+                "particles/shape": drops.species, "particles/scale": drops.scale,
+                "particles/state": result.state, "particles/contacts": result.contacts,
+                "particles/event_counts": result.event_counts, "particles/steps": result.steps,
+                "shapes/offsets": np.concatenate([s.offsets for s in species]),
+                "shapes/radius": np.concatenate([s.radii for s in species]),
+                "shapes/start": np.cumsum([0, *(len(s.radii) for s in species)]),
+                "substrate/position": substrate[0], "substrate/radius": substrate[1]},
+        box_lower=np.array([lower[0], lower[1], 0.0]), box_upper=np.array([upper[0], upper[1], top]),
+        periodic=np.array([periodic, periodic, False]), attrs=attrs)
 
 
 SOLVER = Solver(kind="deposition", description="steepest descent ballistic deposition of multi-sphere particles "
-                "(Topic & Poeschel 2016)", parameters=PARAMETERS, statistics=STATISTICS,
-                coordinates=coordinates, check=check, cost=cost, memory=memory, memory_keys=memory_keys,
-                warm_up_parameters=warm_up_parameters, solve=solve)
+                "(Topic & Poeschel 2016)", parameters=PARAMETERS, statistics=statistics.STATISTICS,
+                coordinates=statistics.coordinates, check=check, cost=cost, memory=memory, memory_keys=memory_keys,
+                warm_up_parameters=warm_up_parameters, solve=solve, tables=(SPECIES_TABLE, LAYERS_TABLE))

@@ -1,0 +1,269 @@
+"""The particles of a deposition task: its species, their shapes and sizes, and the order of the drops.
+
+A task deposits a mixture of *species*.  A species is a particle shape (a template of
+spheres about its centre of mass, built once) with its own size distribution and its
+share of the mixture.  Without ``[[species]]`` the job's own keys make the only species;
+with them, each ``[[species]]`` entry sets some of :data:`SPECIES_KEYS` and takes the job's
+value of the others (a job-level key, swept or fixed, is the default of every species).
+
+The drops come in *layers*: without ``[[layers]]`` one layer of ``n_particles`` particles
+drawn from all species; with them, ``n`` particles of the species a layer names, then the
+next layer, so that a stratified sediment is one task.  Within a layer every particle's
+species is drawn independently with the probabilities of the species' shares (by number,
+or by volume: ``share_basis``).
+
+Random streams: the species of the particles come from one stream, the sizes of each
+species from its own, so the first k particles of a task are those of the same task with k
+particles (the sizes of a single species come from the size stream itself, as before
+mixtures existed: a one-species job's sediment is unchanged).
+"""
+
+import functools
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsim.agglomerate_file import read_agglomerate
+from parsim.core import shapes as shape_library
+from parsim.core import sieve
+from parsim.core.shapes.mesh import mesh_particle
+from parsim.errors import JobError
+
+SPECIES_KEYS = ("shape", "shape_size", "shape_spacing", "semi_axis_x", "semi_axis_y", "semi_axis_z",
+                "exponent_vertical", "exponent_horizontal", "shape_spheres", "agglomerate_file", "mesh_file",
+                "mesh_spheres", "sphere_radius", "size_distribution", "size_spread", "sieve_curve", "sieve_basis")
+"""The keys a ``[[species]]`` entry may set besides ``name`` and ``share``."""
+SPECIES_NAME = re.compile(r"[A-Za-z0-9_.+-]+")
+LOGNORMAL_TAIL = 6.0  # standard deviations: the largest lognormal factor a box must hold (never reached)
+
+
+@dataclass(frozen=True)
+class Species:
+    """One species of a task: its parameters (the job's, with the entry's own keys) and its template."""
+
+    name: str
+    params: dict
+    share: float
+    offsets: np.ndarray  # (k, 3) sphere centres about the centre of mass, at scale 1
+    radii: np.ndarray  # (k,)
+    volume: float  # of the template at scale 1
+
+    @property
+    def equivalent_diameter(self) -> float:
+        """Diameter of the sphere of the template's volume: the size a sieve curve gives."""
+        return (6.0 * self.volume / math.pi) ** (1.0 / 3.0)
+
+    @property
+    def extent(self) -> float:
+        """Distance from the centre of mass to the farthest sphere surface, at scale 1."""
+        return float(shape_library.bounding_radius(self.offsets, self.radii))
+
+    def largest_scale(self) -> float:
+        """The largest size factor the distribution gives (box-fit checks)."""
+        kind, spread = self.params["size_distribution"], self.params["size_spread"]
+        if kind == "uniform":
+            return 1.0 + spread
+        if kind == "lognormal":
+            return float(np.exp(LOGNORMAL_TAIL * spread))
+        if kind == "sieve":
+            return sieve.size_range(sieve_curve(self.params))[1] / self.equivalent_diameter
+        return 1.0
+
+    def mean_scale_cubed(self) -> float:
+        """E[s^3] of the size factor s: a particle's mean volume is this times the template's."""
+        kind, spread = self.params["size_distribution"], self.params["size_spread"]
+        if kind == "uniform" and spread > 0.0:
+            return ((1.0 + spread) ** 4 - (1.0 - spread) ** 4) / (8.0 * spread)
+        if kind == "lognormal":
+            return float(np.exp(4.5 * spread**2))
+        if kind == "sieve":
+            curve = sieve_curve(self.params)
+            return sieve.mean_cubed_size(curve, self.params["sieve_basis"]) / self.equivalent_diameter**3
+        return 1.0
+
+    def size_factors(self, count: int, rng: np.random.Generator) -> np.ndarray:
+        """``count`` size factors, drawn in order (the first k do not depend on ``count``)."""
+        kind, spread = self.params["size_distribution"], self.params["size_spread"]
+        if kind == "uniform":
+            return rng.uniform(1.0 - spread, 1.0 + spread, count)
+        if kind == "lognormal":
+            return np.exp(spread * rng.standard_normal(count))
+        if kind == "sieve":
+            sizes = sieve.sample_sizes(sieve_curve(self.params), self.params["sieve_basis"], count, rng)
+            return sizes / self.equivalent_diameter
+        return np.ones(count)
+
+
+@dataclass(frozen=True)
+class Drops:
+    """The particles of a task in deposition order: species index and size factor of each."""
+
+    species: np.ndarray  # (n,) int64
+    scale: np.ndarray  # (n,)
+
+
+def species_of(params: dict) -> tuple[Species, ...]:
+    """The task's species, in the order of ``[[species]]`` (one, named after its shape, without it)."""
+    entries = params.get("species") or ({},)
+    found = []
+    for i, entry in enumerate(entries):
+        own = {**params, **{key: value for key, value in entry.items() if key in SPECIES_KEYS}}
+        default_name = own["shape"] if len(entries) == 1 else f"species_{i}"
+        offsets, radii, volume = particle_shape(own)
+        found.append(Species(entry.get("name", default_name), own, entry.get("share", 1.0), offsets, radii, volume))
+    return tuple(found)
+
+
+def check_species(params: dict) -> None:
+    """The checks across entries: distinct names, layers that name species and add up to ``n_particles``."""
+    species = species_of(params)
+    names = [s.name for s in species]
+    for name in names:
+        if not SPECIES_NAME.fullmatch(name):
+            raise JobError(f"[[species]] name = {name!r}: allowed: letters, digits and _ . + - (no blanks; the "
+                           "dataset's species flag_meanings)")
+        if names.count(name) > 1:
+            raise JobError(f"[[species]] name = {name!r} is given twice; allowed: distinct names")
+    for s in species:
+        _check_size_distribution(s)
+    layers = params.get("layers") or ()
+    for i, layer in enumerate(layers):
+        for name in _layer_species_names(layer):
+            if name not in names:
+                raise JobError(f"[[layers]] entry {i + 1}: species = {layer['species']!r} names no species; "
+                               f"allowed: names of [[species]] ({', '.join(repr(n) for n in names)}), "
+                               "separated by commas, or \"\" for all")
+    if layers and sum(layer["n_particles"] for layer in layers) != params["n_particles"]:
+        total = sum(layer["n_particles"] for layer in layers)
+        raise JobError(f"n_particles = {params['n_particles']} but the [[layers]] hold {total} particles; "
+                       f"allowed: n_particles = {total}")
+
+
+def draw_particles(params: dict, species: tuple[Species, ...], species_rng, size_rng) -> Drops:
+    """The species and the size factor of every particle, in deposition order."""
+    n = params["n_particles"]
+    index = np.empty(n, dtype=np.int64)
+    uniform = species_rng.random(n) if len(species) > 1 else np.zeros(n)
+    first = 0
+    for count, probabilities in _layer_plan(params, species):
+        cumulative = np.cumsum(probabilities)
+        cumulative /= cumulative[-1]
+        index[first:first + count] = np.searchsorted(cumulative, uniform[first:first + count], side="right")
+        first += count
+    index = np.minimum(index, len(species) - 1)  # round-off at the top of the cumulative
+    scale = np.empty(n)
+    streams = [size_rng] if len(species) == 1 else size_rng.spawn(len(species))
+    for s, stream in enumerate(streams):
+        mine = index == s
+        scale[mine] = species[s].size_factors(int(mine.sum()), stream)
+    return Drops(index, scale)
+
+
+def number_probabilities(params: dict, species: tuple[Species, ...]) -> np.ndarray:
+    """Probability that a particle is of each species: the shares by number, or by volume
+    divided by each species' mean particle volume."""
+    shares = np.array([s.share for s in species], dtype=float)
+    if params["share_basis"] == "volume":
+        shares = shares / np.array([s.volume * s.mean_scale_cubed() for s in species])
+    return shares / shares.sum()
+
+
+def _layer_plan(params, species):
+    """(count, probabilities over all species) of each layer in deposition order."""
+    probabilities = number_probabilities(params, species)
+    layers = params.get("layers") or ({"n_particles": params["n_particles"], "species": ""},)
+    names = [s.name for s in species]
+    plan = []
+    for layer in layers:
+        chosen = _layer_species_names(layer) or names
+        mask = np.array([name in chosen for name in names])
+        plan.append((layer["n_particles"], np.where(mask, probabilities, 0.0)))
+    return plan
+
+
+def _layer_species_names(layer: dict) -> list[str]:
+    return [name.strip() for name in layer.get("species", "").split(",") if name.strip()]
+
+
+def _check_size_distribution(s: Species) -> None:
+    where = f"species {s.name!r}: " if s.params.get("species") else ""
+    if s.params["size_distribution"] == "uniform" and not s.params["size_spread"] < 1.0:
+        raise JobError(f"{where}size_spread = {s.params['size_spread']} with size_distribution = 'uniform': "
+                       "allowed: 0 <= size_spread < 1 (factors must stay positive)")
+    if s.params["size_distribution"] == "sieve":
+        if not s.params["sieve_curve"]:
+            raise JobError(f"{where}size_distribution = 'sieve' needs sieve_curve (a CSV file of sieve size, "
+                           "cumulative percent passing)")
+        sieve_curve(s.params)  # reads and checks the file
+
+
+def sieve_curve(params: dict) -> "sieve.SieveCurve":
+    return _read_sieve_curve(params["sieve_curve"])
+
+
+@functools.lru_cache(maxsize=16)
+def _read_sieve_curve(path: str) -> "sieve.SieveCurve":
+    return sieve.read_sieve_curve(path)
+
+
+def particle_shape(params: dict) -> tuple[np.ndarray, np.ndarray, float]:
+    """Offsets and radii of the particle (in length units, about its centre of mass) and its volume."""
+    if params["shape"] == "agglomerate" and not params["agglomerate_file"]:
+        raise JobError("shape = 'agglomerate' needs agglomerate_file (a CSV or HDF5 file of spheres)")
+    if params["shape"] == "mesh" and not params["mesh_file"]:
+        raise JobError("shape = 'mesh' needs mesh_file (a closed triangle mesh, STL or OBJ)")
+    return _built_shape(params["shape"], params["shape_size"], params["shape_spacing"],
+                        (params["semi_axis_x"], params["semi_axis_y"], params["semi_axis_z"]),
+                        (params["exponent_vertical"], params["exponent_horizontal"]), params["shape_spheres"],
+                        params["agglomerate_file"], params["mesh_file"], params["mesh_spheres"],
+                        params["sphere_radius"])
+
+
+def mesh_approximation(params: dict):
+    """The error measures of a mesh particle's spheres (:func:`parsim.core.shapes.mesh.mesh_particle`)."""
+    return _mesh_spheres(params["mesh_file"], params["mesh_spheres"])[2]
+
+
+@functools.lru_cache(maxsize=8)
+def _mesh_spheres(path: str, n_spheres: int):
+    try:
+        return mesh_particle(path, n_spheres=n_spheres)
+    except ValueError as error:
+        raise JobError(f"mesh_file = {path!r}: {error}") from None
+
+
+@functools.lru_cache(maxsize=16)
+def _built_shape(shape, size, spacing, semi_axes, exponents, n_spheres, agglomerate_file, mesh_file, mesh_spheres,
+                 sphere_radius):
+    """Build once per process: the smooth bodies and meshes take seconds for thousands of spheres."""
+    if shape == "sphere":
+        offsets, radii = shape_library.sphere()
+    elif shape == "rod":
+        offsets, radii = shape_library.rod(size, spacing=spacing)
+    elif shape == "four_rods":
+        offsets, radii = shape_library.four_rods(size, spacing=spacing)
+    elif shape == "tripod":
+        offsets, radii = shape_library.tripod(size, spacing=spacing)
+    elif shape == "spiky":
+        offsets, radii = shape_library.spiky(size)
+    elif shape == "cube":
+        offsets, radii = shape_library.cube(size)
+    elif shape == "ellipsoid":
+        offsets, radii = shape_library.ellipsoid(semi_axes, n_spheres)
+    elif shape == "superellipsoid":
+        offsets, radii = shape_library.superellipsoid(semi_axes, exponents, n_spheres)
+    elif shape == "mesh":  # scaled to the volume-equivalent radius 1 (then sphere_radius)
+        offsets, radii, _ = _mesh_spheres(mesh_file, mesh_spheres)
+        _, volume = shape_library.centre_of_mass_of_union(offsets, radii)
+        unit = (3.0 * volume / (4.0 * math.pi)) ** (1.0 / 3.0)
+        offsets, radii = offsets / unit, radii / unit
+    else:
+        centres, file_radii = read_agglomerate(agglomerate_file)
+        offsets, radii = shape_library.agglomerate(centres / file_radii.mean(), file_radii / file_radii.mean())
+    offsets, radii = offsets * sphere_radius, radii * sphere_radius
+    _, volume = shape_library.centre_of_mass_of_union(offsets, radii)
+    offsets.setflags(write=False)
+    radii.setflags(write=False)
+    return offsets, radii, float(volume)
