@@ -178,13 +178,12 @@ def test_mesh_particles_rest_in_a_walled_box():
 def test_no_contact_across_opposite_walls():
     """Two spheres touching opposite walls of a walled box do not touch each other; in a periodic
     box of the same side they do, through the side."""
-    from parsim.core.sediment import coordination
-    from parsim.solvers.deposition_statistics import Region, _contact_box
+    from parsim.solvers.deposition_statistics import Region, _contacts
 
     length = 6.0
     positions = np.array([[0.5, 3.0, 0.5], [length - 0.5, 3.0, 0.5]])
-    radii, particle, com_z = np.full(2, 0.5), np.arange(2), np.full(2, 0.5)
     for periodic, expected in ((False, 0.0), (True, 1.0)):
         region = Region(np.zeros(2), np.full(2, length), periodic, True)
-        mean, _ = coordination(positions, radii, particle, com_z, *_contact_box(region, radii), 0.0, 1.0)
-        assert mean == expected
+        contacts = _contacts(positions, np.full(2, 0.5), np.arange(2), region, np.ones(2, dtype=bool))
+        assert contacts["bulk_coordination"] == expected
+        assert contacts["contact_number_fraction"][int(expected)] == 1.0

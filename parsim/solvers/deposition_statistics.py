@@ -19,12 +19,13 @@ import numpy as np
 
 from parsim.core import sdbd
 from parsim.core import structure
-from parsim.core.sediment import coordination, filling_height, packing_fractions
+from parsim.core.sediment import filling_height, packing_fractions
 from parsim.parameters import Parameter
 from parsim.solver import LENGTH_UNITS, Coordinate, Statistic, coded_coordinate
 
 BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the filling height, away from floor and surface
 PROFILE_TOP = 1.25  # the profile phi(z) covers 0 <= z <= PROFILE_TOP x filling height
+RDF_REFERENCES = 2000  # g(r) from at most this many reference centres (noise ~ 1/sqrt of it per shell)
 MAX_CONTACT_NUMBER = 24  # the distribution of contact numbers counts 0 ... this
 AXES = ("x", "y", "z")
 
@@ -143,21 +144,19 @@ def measure(params, result, species, drops, region, skip, substrate) -> dict:
     in_bulk = (result.center_of_mass[:, 2] >= slab[0]) & (result.center_of_mass[:, 2] < slab[1])
     positions = np.concatenate([substrate[0], result.positions])
     radii = np.concatenate([substrate[1], result.radii])
-    n = len(drops.scale)
-    # the substrate is one more particle, index n, below every slab
-    particle = np.concatenate([np.full(len(substrate[1]), n), result.particle])
-    com_z = np.append(result.center_of_mass[:, 2], -np.inf)
+    # the substrate is one more particle, index n, never in the bulk
+    particle = np.concatenate([np.full(len(substrate[1]), len(drops.scale)), result.particle])
     statistics = {
         "filling_height": height,
         **_packing(params, result, region, height, slab, drops, len(species), positions, radii),
         **_mixture(result, species, drops, volume, height),
-        **_structure(params, result, species, drops, region, slab, in_bulk, positions, radii, particle),
+        **_orientations(params, result, species, drops, in_bulk),
+        "radial_distribution": _radial_distribution(params, result, species, drops, region, slab),
+        **_contacts(positions, radii, particle, region, in_bulk),
         "n_spheres": len(result.radii),
         "events_per_particle": float(result.event_counts.sum(axis=1).mean()),
         "largest_steps_per_particle": int(result.steps.max()),
     }
-    statistics["bulk_coordination"], statistics["n_bulk_particles"] = coordination(
-        positions, radii, particle, com_z, *_contact_box(region, radii), *slab)
     counted_spheres = int(np.sum(result.particle >= skip))
     statistics["spheres_per_second"] = (counted_spheres / result.clocked_seconds if result.clocked_seconds > 0
                                         else np.nan)
@@ -182,6 +181,9 @@ def _packing(params, result, region, height, slab, drops, n_species, positions, 
                                  samples=params["packing_samples"]) / region.inside_fraction
 
     everything = fractions(positions, radii)
+    if n_species == 1 and len(positions) == len(result.positions):  # one species, no substrate: phi_s = phi
+        return {"bulk_packing_fraction": float(everything[0]), "packing_profile": everything[1:],
+                "species_packing_profile": everything[None, 1:]}
     sphere_species = drops.species[result.particle]
     per_species = np.zeros((n_species, bins))
     for s in range(n_species):
@@ -219,53 +221,50 @@ def _mesh_error(s) -> tuple[float, float]:
     return float(error.volume_error), float(error.relative_surface_distance)
 
 
-def _structure(params, result, species, drops, region, slab, in_bulk, positions, radii, particle) -> dict:
-    """Orientation order, g(r), contact numbers and fabric of the bulk particles."""
+def _orientations(params, result, species, drops, in_bulk) -> dict:
+    """Orientation order and the distribution of the angle to the vertical of the bulk particles' long axes."""
     axes = _long_axes(result, species, drops)[in_bulk]
     axes = axes[np.all(np.isfinite(axes), axis=1)]
-    orientation_bins = params["orientation_bins"]
-    if len(axes):
-        nematic = structure.nematic_order(axes)[0]
-        vertical = structure.vertical_order(axes)
-        density = structure.angle_distribution(axes, orientation_bins)[1]
-    else:
-        nematic, vertical, density = np.nan, np.nan, np.full(orientation_bins, np.nan)
+    bins = params["orientation_bins"]
+    if not len(axes):
+        return {"nematic_order": np.nan, "vertical_order": np.nan, "orientation_density": np.full(bins, np.nan)}
+    return {"nematic_order": structure.nematic_order(axes)[0], "vertical_order": structure.vertical_order(axes),
+            "orientation_density": structure.angle_distribution(axes, bins)[1]}
+
+
+def _radial_distribution(params, result, species, drops, region, slab) -> np.ndarray:
+    """g(r) on the job's shells (r over the mean volume-equivalent diameter); shells beyond half a
+    periodic box's width (minimum images) are NaN."""
     diameters = np.array([s.equivalent_diameter for s in species])[drops.species] * drops.scale
-    unit = float(diameters.mean())
-    g = _radial_distribution(params, result, region, slab, unit)
-    pairs, normals = structure.contact_pairs(positions, radii, particle, region.lower, region.upper,
-                                             region.periodic)
-    n = len(drops.scale)
-    counts = structure.contacts_per_particle(pairs, particle, n + 1)[:n]
-    fractions = structure.contact_number_distribution(counts, in_bulk, MAX_CONTACT_NUMBER)
-    bulk_pair = in_bulk[np.minimum(particle[pairs[:, 0]], n - 1)] & (particle[pairs[:, 0]] < n)
-    bulk_pair |= in_bulk[np.minimum(particle[pairs[:, 1]], n - 1)] & (particle[pairs[:, 1]] < n)
-    fabric = structure.fabric_tensor(normals[bulk_pair]) if bulk_pair.any() else np.full((3, 3), np.nan)
-    return {"nematic_order": nematic, "vertical_order": vertical, "orientation_density": density,
-            "radial_distribution": g, "contact_number_fraction": fractions, "fabric_tensor": fabric}
-
-
-def _radial_distribution(params, result, region, slab, unit) -> np.ndarray:
-    """g(r) on the job's shells; those beyond half a periodic box's width (minimum images) are NaN."""
     bins = params["rdf_bins"]
-    width = params["rdf_range"] * unit / bins
+    width = params["rdf_range"] * float(diameters.mean()) / bins
     usable = bins
     if region.periodic:
         usable = min(bins, int(0.5 * float(np.min(region.upper - region.lower)) / width))
     g = np.full(bins, np.nan)
     if usable > 0:
         g[:usable] = structure.radial_distribution(result.center_of_mass, region.lower, region.upper,
-                                                   region.periodic, *slab, usable * width, usable)[1]
+                                                   region.periodic, *slab, usable * width, usable,
+                                                   max_references=RDF_REFERENCES)[1]
     return g
 
 
-def _contact_box(region, radii):
-    """The horizontal box of the contact search, periodic in its grid: the region itself when
-    it is periodic, else widened so that no contact is found across opposite walls."""
-    if region.periodic:
-        return region.lower, region.upper
-    reach = 4.0 * float(radii.max())
-    return region.lower - reach, region.upper + reach
+def _contacts(positions, radii, particle, region, in_bulk) -> dict:
+    """Coordination, contact numbers and fabric of the bulk particles, from one search of the
+    sphere contacts between particles (periodic only across the sides of a periodic box).
+    ``particle`` numbers the substrate's spheres ``len(in_bulk)``."""
+    pairs, normals = structure.contact_pairs(positions, radii, particle, region.lower, region.upper,
+                                             region.periodic)
+    n = len(in_bulk)
+    sphere_contacts = np.bincount(particle[pairs].ravel(), minlength=n + 1)[:n]
+    touched = structure.contacts_per_particle(pairs, particle, n + 1)[:n]
+    bulk = np.append(in_bulk, False)  # the substrate is never in the bulk
+    with_bulk = bulk[particle[pairs[:, 0]]] | bulk[particle[pairs[:, 1]]]
+    count = int(in_bulk.sum())
+    return {"bulk_coordination": float(sphere_contacts[in_bulk].mean()) if count else np.nan,
+            "n_bulk_particles": count,
+            "contact_number_fraction": structure.contact_number_distribution(touched, in_bulk, MAX_CONTACT_NUMBER),
+            "fabric_tensor": structure.fabric_tensor(normals[with_bulk])}
 
 
 def _long_axes(result, species, drops) -> np.ndarray:
