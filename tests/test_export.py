@@ -26,7 +26,8 @@ from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
 
 from parsim.agglomerate_file import read_agglomerate
 from parsim.errors import JobError
-from parsim.output.export import FORMATS, add_export_command, export_output, quaternion_matrices, run_export
+from parsim.core.sdbd.rotation import quat_to_matrix
+from parsim.output.export import FORMATS, add_export_command, export_output, run_export
 from parsim.solvers.deposition import particle_shape
 from tests.datasets import run_serial
 
@@ -303,11 +304,18 @@ def test_particle_table_and_shapes_rebuild_the_sediment(outputs, tmp_path):
     close(np.column_stack([templates[axis] for axis in ("dx", "dy", "dz")]), offsets)
     close(templates["r"], radii)
     # every sphere is centre + R(q) scale offset, radius scale r, in the task file's order
-    rotations = quaternion_matrices(np.column_stack([particles[f"q{axis}"] for axis in "wxyz"]))
+    rotations = [_solver_rotation(q) for q in np.column_stack([particles[f"q{axis}"] for axis in "wxyz"])]
     centres = np.column_stack([particles[axis] for axis in "xyz"])
     rebuilt = [centres[p] + particles["scale"][p] * offsets @ rotations[p].T for p in range(len(particles))]
     close(np.concatenate(rebuilt), expected.position)
     close(np.concatenate([particles["scale"][p] * radii for p in range(len(particles))]), expected.radius)
+
+
+def _solver_rotation(quaternion):
+    """The deposition kernel's own rotation matrix of a unit quaternion (w, x, y, z)."""
+    matrix = np.empty((3, 3))
+    quat_to_matrix(np.ascontiguousarray(quaternion, dtype=np.float64), matrix)
+    return matrix
 
 
 def command_line(*arguments):

@@ -262,28 +262,20 @@ def write_yade(task: TaskSpheres, path: Path) -> list[Path]:
                                             f"{REAL} {REAL} {REAL} {REAL} %d"))
 
 
-def quaternion_matrices(rotation: np.ndarray) -> np.ndarray:
-    """Rotation matrices (P, 3, 3) of unit quaternions (P, 4) ``(w, x, y, z)``, as the deposition solver's."""
-    w, x, y, z = np.asarray(rotation, dtype=np.float64).T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=-2)
-
-
 def shape_templates(task: TaskSpheres) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Sphere offsets (k, 3) and radii (k,) of each shape at scale 1, from the task file itself.
 
-    The task file stores no templates, but every particle obeys position = centre of mass
-    + R(q) · scale · offset and radius = scale · template radius (docs/jobs.md), so the first
-    particle of each shape gives its template, to round-off: the same spheres as the
-    solver's ``particle_shape`` for the task's parameters, with no need of the job's input
-    files.  Every other particle is checked against it; a task file that disagrees is refused.
+    Every particle obeys position = centre of mass + R(q) · scale · offset and radius =
+    scale · template radius (docs/jobs.md), so the first particle of each shape gives its
+    template, to round-off: the same spheres as the solver's ``particle_shape`` for the task's
+    parameters (and as the ``shapes/*`` a task file of output schema 3 stores), with no need of
+    the job's input files.  Every other particle is checked against it; a task file that disagrees is refused.
     """
+    from parsim.core.structure import rotation_matrices  # here: it compiles kernels, which export needs only here
+
     arrays = task.arrays
     centre, scale = arrays["particles/center_of_mass"], arrays["particles/scale"]
-    shape, matrices = arrays["particles/shape"], quaternion_matrices(arrays["particles/rotation"])
+    shape, matrices = arrays["particles/shape"], rotation_matrices(arrays["particles/rotation"])
     # offset of each sphere in its particle's frame, at scale 1: R^T (x - c) / s
     local = np.einsum("nji,nj->ni", matrices[task.body], task.position - centre[task.body]) / scale[task.body, None]
     templates = {}
