@@ -63,13 +63,20 @@ def main(argv: list[str] | None = None) -> int:
     plot.add_argument("--task", metavar="LABEL",
                       help="the task the pictures show (sediment, cluster), e.g. p0003_r0001; default: the first")
 
+    collect = commands.add_parser("collect", help="write the dataset of the tasks finished so far (the job may be "
+                                  "running: collect takes no lock and writes beside the job's dataset)")
+    collect.add_argument("output", type=Path, help="output folder of a job")
+    collect.add_argument("--out", type=Path, metavar="PATH",
+                         help="the netCDF file to write (default: OUTPUT/NAME.partial.nc)")
+
     add_export_command(commands)
 
     args = parser.parse_args(argv)
     if args.command == "run":
         return _run(args)
     try:
-        return {"validate": _validate, "info": _info, "plot": _plot, "export": run_export}[args.command](args)
+        return {"validate": _validate, "info": _info, "plot": _plot, "collect": _collect,
+                "export": run_export}[args.command](args)
     except ParsimError as error:
         print(f"parsim: error: {error}", file=sys.stderr)
         return EXIT_USER_ERROR
@@ -135,6 +142,14 @@ def _info(args) -> int:
     from parsim.report import describe_output
 
     print(describe_output(args.output))
+    return 0
+
+
+def _collect(args) -> int:
+    from parsim.output.collect import collect_output
+
+    path, finished, total = collect_output(args.output, args.out)
+    print(f"{path}: {finished} of {total} tasks finished (the others NaN, 'completed' = 0)")
     return 0
 
 

@@ -4,19 +4,11 @@ from pathlib import Path
 
 import xarray as xr
 
-from parsim.errors import JobError
-from parsim.job import parse_job
-from parsim.output.folder import OutputFolder
-from parsim.solvers import SOLVERS
+from parsim.output.folder import open_output
 
 
 def describe_output(root: Path) -> str:
-    folder = OutputFolder(root, job_name="")
-    if not folder.job_copy.exists():
-        raise JobError(f"{root} is not a parsim output folder (no {folder.job_copy.name} in it)")
-    job = parse_job(folder.job_copy.read_text(), SOLVERS, source=str(folder.job_copy), output=root)
-    folder = OutputFolder(root, job.name)
-    folder.check_schema()
+    folder, job = open_output(root)
     tasks = job.tasks()
     done = sum(folder.is_finished(task) for task in tasks)
 

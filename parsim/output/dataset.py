@@ -48,24 +48,30 @@ def all_statistics(solver: Solver) -> tuple[Statistic, ...]:
     return (*solver.statistics, WALL_TIME)
 
 
-def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict], mpi_size: int,
-                  ranks_per_task: int) -> xr.Dataset:
-    """Assemble the dataset; ``statistics_of(task)`` gives one finished task's statistics."""
+def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict | None], mpi_size: int,
+                  ranks_per_task: int, partial: bool = False) -> xr.Dataset:
+    """Assemble the dataset; ``statistics_of(task)`` gives one finished task's statistics.  A
+    ``partial`` dataset (:mod:`parsim.output.collect`) takes None for a task not finished yet:
+    its statistics are all floating point, NaN for such tasks."""
     coords = {**_sweep_coordinates(job, solver), **_observable_coordinates(job, solver),
               **_fixed_coordinates(job, solver)}
-    return xr.Dataset(_statistics_variables(job, solver, statistics_of), coords=coords,
+    return xr.Dataset(_statistics_variables(job, solver, statistics_of, partial), coords=coords,
                       attrs=_global_attributes(job, mpi_size, ranks_per_task))
 
 
-def _statistics_variables(job: Job, solver: Solver, statistics_of: Callable[[Task], dict]) -> dict[str, xr.Variable]:
+def _statistics_variables(job: Job, solver: Solver, statistics_of: Callable[[Task], dict | None],
+                          partial: bool) -> dict[str, xr.Variable]:
     """One variable per statistic, dimensions (sweep..., realization, observable...)."""
     observable = solver.coordinates(job.constants)
     leading_shape = (*job.sweep_shape, job.realizations)
     statistics = all_statistics(solver)
-    arrays = {s.name: np.empty(leading_shape + tuple(len(observable[d].values) for d in s.dims), dtype=s.dtype)
+    shapes = {s.name: leading_shape + tuple(len(observable[d].values) for d in s.dims) for s in statistics}
+    arrays = {s.name: np.full(shapes[s.name], np.nan) if partial else np.empty(shapes[s.name], dtype=s.dtype)
               for s in statistics}
     for task in job.tasks():
         values = statistics_of(task)
+        if values is None and partial:
+            continue
         index = (*np.unravel_index(task.point, job.sweep_shape), task.realization) if job.sweep else (task.realization,)
         for s in statistics:
             arrays[s.name][index] = values[s.name]

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from parsim.errors import JobError, OutputError
-from parsim.job import UNIT_KEYS, Job, Task
+from parsim.job import UNIT_KEYS, Job, Task, parse_job
 from parsim.output.atomic import TEMPORARY_SUFFIX, written_atomically
 from parsim.output.snapshot import check_schema, read_schema_attributes
 
@@ -104,6 +104,19 @@ class OutputFolder:
         except ValueError:
             raise JobError(f"output folder {self.root}: {self.inputs} is not parsim's record of the input files; "
                            f"give another output folder or remove {self.root}") from None
+
+
+def open_output(root: Path) -> tuple[OutputFolder, Job]:
+    """The output folder ``root`` of a job and its job (from the folder's copy), schema checked."""
+    from parsim.solvers import SOLVERS  # here: the solvers import numba, which a folder alone does not need
+
+    folder = OutputFolder(root, job_name="")
+    if not folder.job_copy.exists():
+        raise JobError(f"{root} is not a parsim output folder (no {folder.job_copy.name} in it)")
+    job = parse_job(folder.job_copy.read_text(), SOLVERS, source=str(folder.job_copy), output=root)
+    folder = OutputFolder(root, job.name)
+    folder.check_schema()
+    return folder, job
 
 
 _UNSET = object()
