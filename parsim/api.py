@@ -78,7 +78,7 @@ def run(job: Job | Mapping | str | os.PathLike, output: str | os.PathLike | None
     if mismatch:  # every process would run the whole job into the same folder
         raise JobError(mismatch)
     chosen = _on_every_rank(comm, lambda: on_root(comm, lambda: _as_job(job, output)))
-    path = _on_every_rank(comm, lambda: run_job(chosen, comm, progress=progress, ranks_per_task=ranks_per_task))
+    path, _ = _on_every_rank(comm, lambda: run_job(chosen, comm, progress=progress, ranks_per_task=ranks_per_task))
     return _on_every_rank(comm, lambda: on_root(comm, lambda: _read_dataset(path)))
 
 

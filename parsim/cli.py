@@ -28,7 +28,7 @@ import sys
 from pathlib import Path
 
 import parsim
-from parsim.errors import EXIT_RUN_FAILED, EXIT_USER_ERROR, ParsimError, exit_status
+from parsim.errors import EXIT_RUN_FAILED, EXIT_UNFINISHED, EXIT_USER_ERROR, ParsimError, exit_status
 from parsim.output.export import add_export_command, run_export
 
 
@@ -45,6 +45,10 @@ def main(argv: list[str] | None = None) -> int:
                      help="run each task on a group of K ranks (a divisor of the number of ranks; default 1): "
                           "time-stepping aggregation tasks are decomposed over the group, other tasks run on "
                           "the group's first rank while the others wait")
+    run.add_argument("--time-limit", type=_duration, metavar="[D-]HH:MM:SS",
+                     help="stop handing out tasks in time for the tasks under way to end and the (partial) dataset "
+                          "to be written before this much time has passed, e.g. a batch job's limit minus a margin; "
+                          "the same command continues the job (exit status 3 while tasks are left)")
 
     validate = commands.add_parser("validate", help="check a job file and its output location without computing")
     validate.add_argument("job", type=Path)
@@ -82,6 +86,21 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USER_ERROR
 
 
+def _duration(text: str) -> float:
+    """Seconds of a batch-system time, [D-]HH:MM:SS (Slurm's form), for --time-limit."""
+    days, _, clock = text.rpartition("-")
+    parts = clock.split(":")
+    try:
+        if len(parts) != 3 or (days and int(days) < 0):
+            raise ValueError
+        hours, minutes, seconds = (int(part) for part in parts)
+        if hours < 0 or not 0 <= minutes < 60 or not 0 <= seconds < 60:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed: HH:MM:SS or D-HH:MM:SS, e.g. 23:50:00") from None
+    return ((int(days or 0) * 24 + hours) * 60 + minutes) * 60.0 + seconds
+
+
 def _run(args) -> int:
     """``parsim run`` on every rank: rank 0 reads the job and hands it out, then all ranks run it.
 
@@ -105,7 +124,8 @@ def _run(args) -> int:
         return EXIT_USER_ERROR
     try:
         job = on_root(comm, lambda: load_job(args.job, SOLVERS, output=args.output))
-        path = run_job(job, comm, progress=not args.quiet, ranks_per_task=args.ranks_per_task)
+        path, complete = run_job(job, comm, progress=not args.quiet, ranks_per_task=args.ranks_per_task,
+                                 time_limit=args.time_limit)
     except FailedOnRoot:
         return EXIT_RUN_FAILED  # rank 0 has printed its traceback
     except KeyboardInterrupt:  # before the run's own handler is in place (reading the job)
@@ -121,8 +141,15 @@ def _run(args) -> int:
         if comm.Get_size() == 1:
             raise
         abort_if_alone(comm, error)
+    if complete:
+        if comm.Get_rank() == 0:
+            print(f"dataset: {path}")
+        return 0
     if comm.Get_rank() == 0:
-        print(f"dataset: {path}")
+        kept = f"partial dataset: {path}" if path else "no task has finished"
+        print(f"parsim: --time-limit reached with tasks left ({kept}); run the same command to continue",
+              file=sys.stderr)
+    return EXIT_UNFINISHED
     return 0
 
 

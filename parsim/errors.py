@@ -22,6 +22,8 @@ from pathlib import Path
 EXIT_USER_ERROR = 2
 #: Exit status of a failure while a job runs (a task, a full disk).
 EXIT_RUN_FAILED = 1
+#: Exit status of ``parsim run --time-limit`` stopping with tasks left: the same command continues the job.
+EXIT_UNFINISHED = 3
 
 
 class ParsimError(Exception):

@@ -29,26 +29,40 @@ from mpi4py import MPI
 from parsim.errors import JobError, describe_exception
 from parsim.interrupts import ending_on_signals
 from parsim.job import Job, Task, parse_job
+from parsim.output.collect import collect_output
 from parsim.output.dataset import build_dataset, write_dataset
 from parsim.output.folder import OutputFolder
 from parsim.output.location import check_output_location
 from parsim.output.lock import FolderLock
 from parsim.output.snapshot import read_statistics, write_task_file
 from parsim.parallel.collective import on_root
-from parsim.parallel.scheduler import require_thread_multiple, run_group_tasks
+from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
 from parsim.progress import TaskProgress
 from parsim.solver import TaskResult
 from parsim.solvers import SOLVERS
 
 
+#: A time-limited run stops handing out tasks this long before its limit (plus the next), at least.
+TIME_RESERVE_SECONDS = 30.0
+#: ... and this long per task of the job, for reading its file into the dataset.
+TIME_RESERVE_PER_TASK = 0.01
 #: How long a rank other than 0 waits, after a signal, for rank 0 to end the job before it aborts it itself.
 SIGNAL_GRACE_SECONDS = 2.0
 #: How long rank 0 waits, after a signal, for task files that other ranks are writing, before it counts them.
 WRITE_SETTLE_SECONDS = 0.2
 
 
-def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ranks_per_task: int = 1) -> Path:
-    """Run every unfinished task of ``job`` on groups of ``ranks_per_task`` ranks; returns the dataset path."""
+def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ranks_per_task: int = 1,
+            time_limit: float | None = None) -> tuple[Path | None, bool]:
+    """Run every unfinished task of ``job`` on groups of ``ranks_per_task`` ranks.
+
+    With ``time_limit`` (seconds from now), tasks start only while they can end with
+    :func:`time_reserve` seconds left (:class:`~parsim.parallel.scheduler.TimeLimit`).  Returns
+    (the dataset, True) when every task has finished; else (the partial dataset of
+    :mod:`parsim.output.collect`, or None if no task has finished, False): the same command
+    finishes the job.
+    """
+    limit = TimeLimit(time_limit, time_reserve(job)) if time_limit is not None else None
     on_root(comm, lambda: _check_ranks(comm, ranks_per_task))
     folder = OutputFolder(job.output, job.name)
     lock = FolderLock(folder.root)
@@ -58,12 +72,17 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
     try:
         with ending_on_signals(lambda number: _end_on_signal(number, job, folder, lock, writing, comm)):
             pending = on_root(comm, lambda: _claim(job, folder, lock))
-            _run_pending(job, pending, folder, writing, comm, progress and rank == 0, ranks_per_task)
-            on_root(comm, lambda: _write_dataset(job, folder, comm.Get_size(), ranks_per_task))
+            _run_pending(job, pending, folder, writing, comm, progress and rank == 0, ranks_per_task, limit)
+            return on_root(comm, lambda: _write_outputs(job, folder, comm.Get_size(), ranks_per_task))
     finally:
         if rank == 0:
             lock.release()
-    return folder.dataset
+
+
+def time_reserve(job: Job) -> float:
+    """Seconds a time-limited run keeps for the tasks under way to be reported and the dataset written:
+    ``TIME_RESERVE_SECONDS`` and ``TIME_RESERVE_PER_TASK`` for each task file read."""
+    return TIME_RESERVE_SECONDS + TIME_RESERVE_PER_TASK * len(job.tasks())
 
 
 def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
@@ -80,7 +99,7 @@ def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
 
 
 def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: threading.Lock, comm: MPI.Comm,
-                 progress: bool, ranks_per_task: int) -> None:
+                 progress: bool, ranks_per_task: int, time_limit: TimeLimit | None) -> None:
     solver = SOLVERS[job.kind]
     warm_up(job, pending, progress)
     point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
@@ -110,7 +129,7 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
 
     run_group_tasks(comm, ranks_per_task, len(pending), work,
                     on_finished=lambda k, rank: bar.task_finished(point_costs[pending[k].point]),
-                    describe_failure=describe_failure)
+                    describe_failure=describe_failure, time_limit=time_limit)
     bar.close()
 
 
@@ -162,11 +181,16 @@ def warm_up(job: Job, pending: list[Task], announce: bool) -> None:
         print(f"parsim: kernels ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 
 
-def _write_dataset(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task: int) -> None:
-    solver = SOLVERS[job.kind]
-    dataset = build_dataset(job, solver, lambda task: read_statistics(folder.task_path(task)), mpi_size,
-                            ranks_per_task)
-    write_dataset(dataset, folder.dataset)
+def _write_outputs(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task: int) -> tuple[Path | None, bool]:
+    """Rank 0: the dataset if every task has finished, else the partial dataset of those that have."""
+    if all(folder.is_finished(task) for task in job.tasks()):
+        dataset = build_dataset(job, SOLVERS[job.kind], lambda task: read_statistics(folder.task_path(task)),
+                                mpi_size, ranks_per_task)
+        write_dataset(dataset, folder.dataset)
+        return folder.dataset, True
+    if not any(folder.is_finished(task) for task in job.tasks()):
+        return None, False
+    return collect_output(folder.root)[0], False
 
 
 def _end_on_signal(number: signal.Signals, job: Job, folder: OutputFolder, lock: FolderLock,

@@ -35,3 +35,20 @@ def snapshot_arrays(path: Path) -> dict[str, np.ndarray]:
 def run_serial(*arguments, cwd=None):
     return subprocess.run([sys.executable, *parsim_command(*arguments)], capture_output=True, text=True,
                           timeout=900, cwd=cwd)
+
+
+def small_aggregation_job(name: str, seed: int) -> str:
+    """A job of twelve small 2D aggregation tasks (4 points x 3 realisations), a second or two in all."""
+    return f"""
+name = "{name}"
+kind = "aggregation"
+seed = {seed}
+realizations = 3
+[parameters]
+dimension = 2
+pair_distribution_points = 8
+box_levels = 4
+[sweep]
+n_spheres = [40, 80]
+volume_fraction = [0.1, 0.2]
+"""

@@ -8,21 +8,9 @@ import xarray as xr
 
 from parsim.cli import main
 from parsim.output.lock import FolderLock
-from tests.datasets import run_serial
+from tests.datasets import run_serial, small_aggregation_job
 
-JOB = """
-name = "growing"
-kind = "aggregation"
-seed = 4
-realizations = 3
-[parameters]
-dimension = 2
-pair_distribution_points = 8
-box_levels = 4
-[sweep]
-n_spheres = [40, 80]
-volume_fraction = [0.1, 0.2]
-"""
+JOB = small_aggregation_job("growing", seed=4)
 
 
 @pytest.fixture(scope="module")

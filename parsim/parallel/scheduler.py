@@ -43,17 +43,49 @@ class TaskFailed(ParsimError):
     """A task raised; the message says which task, on which rank, and why."""
 
 
-class _TaskCounter:
-    """The next task index, shared by rank 0's two threads."""
+class TimeLimit:
+    """Hands out a task only while it can end before a deadline, leaving ``reserve`` seconds after it.
 
-    def __init__(self, n_tasks: int):
+    A task may start when now + the longest task so far + ``reserve`` <= the deadline, ``seconds``
+    after this object was made (the run's start); once refused, every later task is (the clock and
+    the longest task only grow).  A task's duration runs from its start to the report of its end.
+    Thread-safe: rank 0's two threads share it.
+    """
+
+    def __init__(self, seconds: float, reserve: float, clock: Callable[[], float] = time.monotonic):
+        self._clock = clock
+        self.deadline = clock() + seconds
+        self.reserve = reserve
+        self.longest = 0.0
+        self._started: dict[int, float] = {}
+        self._lock = threading.Lock()
+
+    def may_start(self, k: int) -> bool:
+        with self._lock:
+            now = self._clock()
+            if now + self.longest + self.reserve > self.deadline:
+                return False
+            self._started[k] = now
+            return True
+
+    def task_finished(self, k: int) -> None:
+        with self._lock:
+            self.longest = max(self.longest, self._clock() - self._started.pop(k))
+
+
+class _TaskCounter:
+    """The next task index, shared by rank 0's two threads; none once the time limit refuses one."""
+
+    def __init__(self, n_tasks: int, time_limit: TimeLimit | None):
         self._next = 0
         self._n_tasks = n_tasks
+        self._time_limit = time_limit
         self._lock = threading.Lock()
 
     def take(self) -> int:
         with self._lock:
-            if self._next >= self._n_tasks:
+            if self._next >= self._n_tasks or (self._time_limit and not self._time_limit.may_start(self._next)):
+                self._next = self._n_tasks
                 return NO_MORE_TASKS
             self._next += 1
             return self._next - 1
@@ -65,26 +97,33 @@ def run_tasks(
     work: Callable[[int], None],
     on_finished: Callable[[int, int], None] | None = None,
     describe_failure: Callable[[int, Exception], str] | None = None,
+    time_limit: TimeLimit | None = None,
 ) -> None:
     """Run ``work(k)`` for every ``k`` in ``range(n_tasks)`` on the ranks of ``comm``.
 
     ``on_finished(k, rank)`` is called on rank 0 (from either of its threads,
     never concurrently) when task ``k`` has finished on ``rank``;
     ``describe_failure(k, error)`` words the message of a failed task (default:
-    the task index and the traceback).  Collective: every rank of ``comm`` calls
-    it and it returns when all tasks are done.
+    the task index and the traceback).  With a ``time_limit`` (used on rank 0),
+    tasks are handed out only while it allows, so some may be left undone.
+    Collective: every rank of ``comm`` calls it and it returns when all tasks
+    handed out are done.
     """
     require_thread_multiple(comm)
     describe_failure = describe_failure or _traceback_message
     finished_lock = threading.Lock()
 
     def finished(k: int, rank: int) -> None:
+        if time_limit is not None:
+            time_limit.task_finished(k)
         if on_finished is not None:
             with finished_lock:
                 on_finished(k, rank)
 
     if comm.Get_size() == 1:
         for k in range(n_tasks):
+            if time_limit is not None and not time_limit.may_start(k):
+                break
             try:
                 work(k)
                 finished(k, 0)
@@ -105,7 +144,7 @@ def run_tasks(
 
     try:
         if sched.Get_rank() == 0:
-            counter = _TaskCounter(n_tasks)
+            counter = _TaskCounter(n_tasks, time_limit)
             server = threading.Thread(target=_serve, args=(sched, counter, finished, report), daemon=True)
             server.start()
             while (k := counter.take()) != NO_MORE_TASKS:
@@ -140,6 +179,7 @@ def run_group_tasks(
     work: Callable[[int, MPI.Comm], None],
     on_finished: Callable[[int, int], None] | None = None,
     describe_failure: Callable[[int, Exception], str] | None = None,
+    time_limit: TimeLimit | None = None,
 ) -> None:
     """Run every task on a group of ``ranks_per_task`` consecutive ranks of ``comm``.
 
@@ -149,10 +189,10 @@ def run_group_tasks(
     the leader by its rank among the leaders.  An exception on any rank of a
     group ends the job (``MPI_Abort`` on ``comm``).  With ``ranks_per_task = 1``
     this is :func:`run_tasks` over ``comm``, each rank a group of one
-    (``MPI.COMM_SELF``).  Collective over ``comm``.
+    (``MPI.COMM_SELF``).  ``time_limit`` as in :func:`run_tasks`.  Collective over ``comm``.
     """
     if ranks_per_task == 1:
-        run_tasks(comm, n_tasks, lambda k: work(k, MPI.COMM_SELF), on_finished, describe_failure)
+        run_tasks(comm, n_tasks, lambda k: work(k, MPI.COMM_SELF), on_finished, describe_failure, time_limit)
         return
     describe_failure = describe_failure or _traceback_message
     rank = comm.Get_rank()
@@ -173,7 +213,7 @@ def run_group_tasks(
 
     try:
         if leading:
-            run_tasks(leaders, n_tasks, lead, on_finished, describe_failure)
+            run_tasks(leaders, n_tasks, lead, on_finished, describe_failure, time_limit)
             _send_task(group, NO_MORE_TASKS)
         else:
             while (k := _receive_task(group)) != NO_MORE_TASKS:
