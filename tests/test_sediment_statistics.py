@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from parsim.core.sediment import coordination, filling_height, packing_fraction, packing_fraction_profile
+from parsim.core.sediment import filling_height, packing_fraction, packing_fraction_profile
+from parsim.core.structure import coordination
 
 
 def simple_cubic(n, layers, radius):

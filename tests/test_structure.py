@@ -4,10 +4,9 @@ import numpy as np
 import pytest
 
 from parsim.core.sdbd.rotation import quat_to_matrix
-from parsim.core.sediment import coordination
 from parsim.core.shapes.simple import cube, rod, sphere, spiky
 from parsim.core.structure import (angle_distribution, contact_number_distribution, contact_pairs,
-                                   contacts_per_particle, fabric_anisotropy, fabric_tensor, lab_axes, long_axis,
+                                   contacts_per_particle, coordination, fabric_anisotropy, fabric_tensor, lab_axes, long_axis,
                                    nematic_order, radial_distribution, rotation_matrices, vertical_order)
 
 # Simple cubic lattice of touching spheres: spacing a = 1, n x n sites per layer in a box of side n.

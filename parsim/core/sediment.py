@@ -5,8 +5,6 @@
 - :func:`packing_fraction`, :func:`packing_fraction_profile`, :func:`packing_fractions`: the
   fraction of horizontal slabs of the box covered by the union of the spheres, for the bulk
   value (slab 0.25 h … 0.75 h) and the profile φ(z);
-- :func:`coordination`: sphere–sphere contacts between different particles, per
-  particle whose centre of mass lies in a slab.
 
 The packing fraction is the volume of the union of the spheres in a slab over the slab's
 volume. The volume of each sphere in each slab is exact: the integral of π (r² − (z − z_c)²)
@@ -105,23 +103,6 @@ def _covered_volumes(positions, radii, box_lower_xy, box_upper_xy, edges, budget
         excess += _sampled_excess(centres, radii, first, neighbour, offset, axis, plane, distance, kind,
                                   edges, unit)
     return volume - excess
-
-
-def coordination(positions, radii, particle, particle_com_z, box_lower_xy, box_upper_xy, z_low, z_high):
-    """Mean number of sphere–sphere contacts with other particles, over particles with z_low <= z_cm < z_high.
-
-    A contact is a pair of spheres of different particles whose gap |x_i − x_j| − R_i − R_j
-    is below ``CONTACT_GAP_TOLERANCE`` times the mean radius.  Returns (mean, number of
-    particles averaged over); the mean is NaN when the slab holds no particle.
-    """
-    grid = _SphereGrid(positions, radii, box_lower_xy, box_upper_xy)
-    tolerance = CONTACT_GAP_TOLERANCE * float(np.mean(radii))
-    per_particle = _contacts_per_particle(grid.positions, grid.radii, np.asarray(particle, dtype=np.int64),
-                                          len(particle_com_z), tolerance, *grid.arrays()[2:])
-    com_z = np.asarray(particle_com_z)
-    selected = (com_z >= z_low) & (com_z < z_high)
-    count = int(selected.sum())
-    return (float(per_particle[selected].mean()) if count else float("nan")), count
 
 
 class _SphereGrid:
@@ -477,28 +458,6 @@ def _sampled_excess(positions, radii, first, neighbour, offset, axis, plane, dis
                 if slab[q] >= 0:
                     excess[slab[q]] += (weight[q] - (0.5 if control and inside[q] else 0.0)) * volume
     return excess
-
-
-@jit
-def _contacts_per_particle(positions, radii, particle, n_particles, tolerance, order, start, lower, upper,
-                           z_lower, cell_height, cells):
-    width = upper - lower
-    neighbours = np.empty(27, dtype=np.int64)
-    contacts = np.zeros(n_particles)
-    for i in range(positions.shape[0]):
-        n_cells = _neighbour_cells(positions[i, 0], positions[i, 1], positions[i, 2], lower, width, z_lower,
-                                   cell_height, cells, neighbours)
-        for c in range(n_cells):
-            for k in range(start[neighbours[c]], start[neighbours[c] + 1]):
-                j = order[k]
-                if particle[j] == particle[i]:
-                    continue
-                dx = _minimum_image(positions[i, 0] - positions[j, 0], width[0])
-                dy = _minimum_image(positions[i, 1] - positions[j, 1], width[1])
-                dz = positions[i, 2] - positions[j, 2]
-                if np.sqrt(dx * dx + dy * dy + dz * dz) - radii[i] - radii[j] < tolerance:
-                    contacts[particle[i]] += 1.0
-    return contacts
 
 
 @jit

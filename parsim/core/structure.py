@@ -163,7 +163,7 @@ def contact_pairs(positions, radii, particle, box_lower_xy, box_upper_xy, period
     Spheres i and j (centres ``positions`` (n, 3), ``radii`` (n,), owned by ``particle`` (n,)) touch
     when particle[i] != particle[j] and their gap |x_j − x_i| − R_i − R_j is below
     ``CONTACT_GAP_TOLERANCE`` times the mean radius (the criterion of
-    :func:`parsim.core.sediment.coordination`). ``pairs`` (m, 2) holds each contact once as sphere
+    :func:`coordination`). ``pairs`` (m, 2) holds each contact once as sphere
     indices i < j, sorted; ``normals`` (m, 3) the unit vectors from sphere i to sphere j. With
     ``periodic`` sides x_j − x_i is the minimum image in x and y (box widths must exceed twice the
     largest diameter); without, the box bounds only lay out the cell list and may be the extent of
@@ -192,12 +192,34 @@ def contact_pairs(positions, radii, particle, box_lower_xy, box_upper_xy, period
     return pairs[ranked], normals[ranked]
 
 
+def coordination(positions, radii, particle, particle_com_z, box_lower_xy, box_upper_xy, z_low, z_high,
+                 periodic=True):
+    """Mean number of sphere–sphere contacts with other particles, over particles with z_low <= z_cm < z_high.
+
+    The contacts of :func:`contact_pairs` (periodic in x and y unless ``periodic`` is False).
+    Returns (mean, number of particles averaged over); the mean is NaN when the slab holds no particle.
+    """
+    pairs, _ = contact_pairs(positions, radii, particle, box_lower_xy, box_upper_xy, periodic)
+    per_particle = sphere_contacts_per_particle(pairs, particle, len(particle_com_z))
+    com_z = np.asarray(particle_com_z)
+    selected = (com_z >= z_low) & (com_z < z_high)
+    count = int(selected.sum())
+    return (float(per_particle[selected].mean()) if count else float("nan")), count
+
+
+def sphere_contacts_per_particle(pairs, particle, n_particles):
+    """Sphere–sphere contacts of each particle (n_particles,) with other particles: a contact of
+    :func:`contact_pairs` counts once for each of its two particles."""
+    owners = np.asarray(particle, dtype=np.int64)[np.asarray(pairs, dtype=np.int64).reshape(-1, 2)]
+    return np.bincount(owners.ravel(), minlength=n_particles)
+
+
 def contacts_per_particle(pairs, particle, n_particles):
     """Contact number Z of each particle (n_particles,): the number of distinct particles it touches.
 
     Several sphere contacts between the same two particles (a rod lying across two spheres of
-    another) count once, as one touching neighbour; :func:`parsim.core.sediment.coordination`
-    instead counts every sphere–sphere contact. ``pairs`` are sphere index pairs of
+    another) count once, as one touching neighbour; :func:`sphere_contacts_per_particle`
+    counts every sphere–sphere contact. ``pairs`` are sphere index pairs of
     :func:`contact_pairs`, ``particle`` maps spheres to particles 0 … n_particles − 1.
     """
     owners = np.sort(np.asarray(particle, dtype=np.int64)[np.asarray(pairs, dtype=np.int64).reshape(-1, 2)], axis=1)

@@ -256,7 +256,7 @@ def _contacts(positions, radii, particle, region, in_bulk) -> dict:
     pairs, normals = structure.contact_pairs(positions, radii, particle, region.lower, region.upper,
                                              region.periodic)
     n = len(in_bulk)
-    sphere_contacts = np.bincount(particle[pairs].ravel(), minlength=n + 1)[:n]
+    sphere_contacts = structure.sphere_contacts_per_particle(pairs, particle, n + 1)[:n]
     touched = structure.contacts_per_particle(pairs, particle, n + 1)[:n]
     bulk = np.append(in_bulk, False)  # the substrate is never in the bulk
     with_bulk = bulk[particle[pairs[:, 0]]] | bulk[particle[pairs[:, 1]]]
