@@ -157,7 +157,7 @@ def run_job(text: str, folder: Path):
     job = parse_job(text, SOLVERS, output=folder)
     (task,) = job.tasks()
     params = job.point_parameters(task.point)
-    return SOLVER.solve(params, np.random.default_rng(job.seed_sequence(task, SOLVER)), MPI.COMM_SELF)
+    return SOLVER.solve(params, np.random.default_rng(job.seed_sequence(task)), MPI.COMM_SELF)
 
 
 def main() -> int:

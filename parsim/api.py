@@ -13,7 +13,7 @@
 :func:`run` is ``parsim run``: the same runner, output folder and resume, on one process or
 on every rank of ``mpiexec -n K python script.py``.  :func:`deposit` and :func:`aggregate`
 solve one task without writing a file: the task of a job with that seed and those parameters
-(validated as a job's, with the solver's defaults), bit for bit the task ``p0000_r0000`` of
+(validated as a job's, with the solver's defaults), bit for bit the task (realisation 0) of
 ``parsim run`` on such a job.  Heavy modules (xarray, mpi4py, numba's kernels) are imported
 when a function needs them, so that ``import parsim`` stays cheap.  docs/python-api.md has a
 worked example.
@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from parsim import job as job_files
 from parsim.errors import JobError
-from parsim.job import UNIT_KEYS, Job, Task
+from parsim.job import UNIT_KEYS, Job
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -39,8 +39,6 @@ if TYPE_CHECKING:
 
     from parsim.solver import Configuration, TaskResult
 
-TASK = Task(point=0, realization=0)
-"""The task that :func:`deposit` and :func:`aggregate` solve: the first of a job, ``p0000_r0000``."""
 T = TypeVar("T")
 _PREPARED: set[str] = set()
 """The small points whose kernels this process has compiled or loaded (see :func:`_prepare_kernels`)."""
@@ -128,7 +126,7 @@ class TaskOutcome:
       scalar coordinates;
     - ``configuration``: the final :class:`~parsim.solver.Configuration` (``arrays`` by task-file
       path, e.g. ``"spheres/position"``, box, periodicity);
-    - ``job``: the one-task job it is the task ``p0000_r0000`` of; ``job.text`` is its job file,
+    - ``job``: the one-task job it is the task of; ``job.text`` is its job file,
       which ``parsim run`` computes to the same numbers;
     - ``result``: the solver's :class:`~parsim.solver.TaskResult` (statistics as plain arrays).
     """
@@ -146,7 +144,7 @@ class TaskOutcome:
 
         ``format``: one of :data:`parsim.output.export.FORMATS` (extxyz, lammps, vtk, csv, yade,
         particles; docs/export.md).  ``path`` is the file to write, or an existing folder to
-        write ``p0000_r0000`` + the format's suffix in.  The task goes through a task file in a
+        write the task's label + the format's suffix in.  The task goes through a task file in a
         temporary folder that is removed afterwards, so the files are those ``parsim export``
         writes for the job's task.  Returns the files written.
         """
@@ -159,7 +157,8 @@ class TaskOutcome:
             folder = OutputFolder(Path(temporary), self.job.name)
             folder.create()
             folder.job_copy.write_text(self.job.text, encoding="utf-8")
-            write_task_file(folder.task_path(TASK), self.result, task_attributes(self.job, TASK))
+            task = self.job.tasks()[0]
+            write_task_file(folder.task_path(task), self.result, task_attributes(self.job, task))
             return export_output(folder.root, format, out=Path(path))
 
     def __repr__(self) -> str:
@@ -176,8 +175,8 @@ def deposit(n_particles: int, *, seed: int, **parameters: Any) -> TaskOutcome:
     ``box_length``, ``lateral``, ...), checked as a job's with the same messages, and
     ``length_unit``; the others take the solver's defaults.  ``species`` and ``layers`` take a
     list of dicts, the entries of the job file's ``[[species]]`` and ``[[layers]]``.  The random
-    stream is that of task ``p0000_r0000`` of a job with this ``seed``, so the outcome equals that task of ``parsim
-    run`` bit for bit.  Serial; under mpiexec each rank that calls it computes it.
+    stream is that of realisation 0 of this point in any job with this ``seed``, so the outcome equals that task
+    of ``parsim run`` bit for bit.  Serial; under mpiexec each rank that calls it computes it.
     """
     return _solve_one_task("deposition", "deposit", seed, {"n_particles": n_particles, **parameters})
 
@@ -189,19 +188,19 @@ def aggregate(n_spheres: int, *, seed: int, **parameters: Any) -> TaskOutcome:
     ``volume_fraction``, ``radius``, ...), checked as a job's, and ``length_unit``,
     ``time_unit``, ``mass_unit``.  The method does not enter the random stream: ``method="ed"``
     and ``method="ts"`` with one seed start from the same initial condition.  The outcome
-    equals task ``p0000_r0000`` of ``parsim run`` on a job with this seed, bit for bit.  Serial
+    equals realisation 0 of this point in ``parsim run`` on a job with this seed, bit for bit.  Serial
     (a time-stepping task on one rank); under mpiexec each rank that calls it computes it.
     """
     return _solve_one_task("aggregation", "aggregate", seed, {"n_spheres": n_spheres, **parameters})
 
 
 def _solve_one_task(kind: str, name: str, seed: int, parameters: dict[str, Any]) -> TaskOutcome:
-    """The task ``p0000_r0000`` of the one-task job ``name`` of ``kind``, solved as the runner solves a task.
+    """The task of the one-task job ``name`` of ``kind``, solved as the runner solves a task.
 
     Errors in the parameters name ``parsim.NAME`` where a job file's name its path."""
     from mpi4py import MPI
 
-    from parsim.output.dataset import build_dataset
+    from parsim.output.dataset import build_dataset, row_layout
     from parsim.runner import solve_task
     from parsim.solvers import SOLVERS
 
@@ -210,8 +209,10 @@ def _solve_one_task(kind: str, name: str, seed: int, parameters: dict[str, Any])
     job = Job.from_dict({"name": name, "kind": kind, "seed": seed, "realizations": 1, **units, **tables,
                          "parameters": parameters}, source=f"parsim.{name}")
     _prepare_kernels(job)
-    result = solve_task(job, TASK, MPI.COMM_SELF)
-    dataset = build_dataset(job, SOLVERS[kind], lambda task: result.statistics, mpi_size=1, ranks_per_task=1)
+    task = job.tasks()[0]
+    result = solve_task(job, task, MPI.COMM_SELF)
+    rows = row_layout(job, SOLVERS[kind]).rows([(task, result.statistics)])
+    dataset = build_dataset(job, SOLVERS[kind], rows, mpi_size=1, ranks_per_task=1)
     return TaskOutcome(job=job, result=result, statistics=dataset.isel(realization=0))
 
 
@@ -224,10 +225,10 @@ def _prepare_kernels(job: Job) -> None:
     from parsim.runner import warm_up
     from parsim.solvers import SOLVERS
 
-    small = SOLVERS[job.kind].warm_up_parameters(job.point_parameters(TASK.point))
+    small = SOLVERS[job.kind].warm_up_parameters(job.point_parameters(0))
     key = repr((job.kind, sorted(small.items())))
     if key not in _PREPARED:
-        warm_up(job, [TASK], announce=True)
+        warm_up(job, job.tasks()[:1], announce=True)
         _PREPARED.add(key)
 
 

@@ -65,7 +65,8 @@ def main(argv: list[str] | None = None) -> int:
                       help="with --figure: the file to write, PATH.png and PATH.pdf (or PATH itself if it ends in "
                            ".png or .pdf, and the other format); without: the folder for every figure")
     plot.add_argument("--task", metavar="LABEL",
-                      help="the task the pictures show (sediment, cluster), e.g. p0003_r0001; default: the first")
+                      help="the task the pictures show (sediment, cluster): its file name in OUTPUT/tasks without .h5; "
+                      "default: the first")
 
     collect = commands.add_parser("collect", help="write the dataset of the tasks finished so far (the job may be "
                                   "running: collect takes no lock and writes beside the job's dataset)")

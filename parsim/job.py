@@ -7,6 +7,7 @@ A job file is TOML::
     seed = 2024                    # job seed; every task's stream derives from it
     realizations = 4               # realisations per parameter point
     output = "output/quickstart"   # folder, relative to the working directory
+    configurations = "all"         # tasks that keep their final configuration: "all", "first", "none"
     length_unit = "m"              # UDUNITS units of the job's numbers (defaults m, s, kg)
 
     [parameters]                   # fixed parameters of the solver
@@ -19,6 +20,7 @@ Every key is checked against the solver's declared parameters before anything
 is computed; errors name the key and the allowed values.
 """
 
+import functools
 import hashlib
 import json
 import math
@@ -77,28 +79,42 @@ def default_units() -> dict[str, str]:
     return {unit.quantity: unit.default for unit in UNIT_KEYS}
 
 
-TOP_LEVEL_KEYS = ("name", "kind", "seed", "realizations", "output", *(unit.key for unit in UNIT_KEYS),
-                  "parameters", "sweep")
+TOP_LEVEL_KEYS = ("name", "kind", "seed", "realizations", "output", "configurations",
+                  *(unit.key for unit in UNIT_KEYS), "parameters", "sweep")
 """The keys of every job; a solver adds its arrays of tables (:attr:`parsim.solver.Solver.tables`)."""
 REQUIRED_TOP_LEVEL = ("name", "kind", "seed", "realizations")
 TOML_INTEGERS = (-2**63, 2**63 - 1)
 """The integers of a TOML file (64-bit); tomllib returns larger ones too."""
 MAX_SEED = TOML_INTEGERS[1]
 MAX_TASKS = 1_000_000
-"""Tasks a job may have: each writes a file, and the job lists them all before it starts."""
+"""Tasks a job may have: the job lists them all, with their keys, before it starts."""
+CONFIGURATIONS = ("all", "first", "none")
+"""Values of the key ``configurations``: which tasks write their final configuration to a task file
+(every task; realisation 0 of every point; none).  The statistics of every task are kept whatever it says."""
+KEY_BYTES = 16
+"""Length of a point's key (:meth:`Job.point_key`): the first 16 bytes of a SHA-256."""
 BINARY_UNITS = ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB", "ZiB", "YiB")
 
 
 @dataclass(frozen=True)
 class Task:
-    """One (parameter point, realisation); ``point`` is the flat index in the sweep grid."""
+    """One (parameter point, realisation) of a job.
+
+    ``point`` is the flat index in the job's sweep grid as written now (row-major, last key
+    fastest): where the task sits in the dataset.  ``key`` names the point by its values
+    (:meth:`Job.point_key`): the task's row, file and random stream follow the key, so they
+    stay the task's own when the sweep grows, shrinks or is written in another order.
+    """
 
     point: int
     realization: int
+    key: bytes = field(repr=False)
 
     @property
     def label(self) -> str:
-        return f"p{self.point:04d}_r{self.realization:04d}"
+        """The task's name in the output folder (its task file ``tasks/LABEL.h5``): the first 16 hex
+        digits of its point's key and its realisation, e.g. ``3fa9c01b2d4e5f60_r0003``."""
+        return f"{self.key.hex()[:16]}_r{self.realization:04d}"
 
 
 @dataclass(frozen=True)
@@ -116,6 +132,8 @@ class Job:
     input_hashes: dict[str, dict[str, str]]  # file parameter -> {path as written: SHA-256 of the content}
     units: dict[str, str] = field(default_factory=default_units)  # quantity -> UDUNITS symbol, e.g. "length": "m"
     tables: dict[str, tuple[dict, ...]] = field(default_factory=dict)  # [[name]] -> its entries, keys as written
+    configurations: str = "all"  # which tasks write a task file: one of CONFIGURATIONS
+    solver: Solver | None = field(default=None, compare=False, repr=False)  # the solver of ``kind``
 
     @property
     def sweep_shape(self) -> tuple[int, ...]:
@@ -138,20 +156,55 @@ class Job:
         return {**self.fixed, **self.tables}
 
     def tasks(self) -> list[Task]:
-        return [Task(p, r) for p in range(self.n_points) for r in range(self.realizations)]
+        """Every task, point by point (row-major over the sweep), realisations fastest."""
+        return [Task(point, r, key) for point, key in enumerate(self._point_keys) for r in range(self.realizations)]
 
-    def seed_sequence(self, task: Task, solver: Solver) -> np.random.SeedSequence:
-        """The task's seed: job seed and task indices, never the rank.
+    def keeps_configuration(self, task: Task) -> bool:
+        """Whether ``task`` writes its final configuration to a task file (key ``configurations``)."""
+        return self.configurations == "all" or (self.configurations == "first" and task.realization == 0)
 
-        The point index counts only the swept parameters that affect the seed,
-        so tasks that differ only in the method share their initial condition.
+    def point_key(self, point: int) -> bytes:
+        """The key of sweep point ``point``: a digest of the canonical encoding of its parameters
+        (:meth:`_canonical`), so that equal values give equal keys in any job."""
+        return self._point_keys[point]
+
+    def seed_sequence(self, task: Task) -> np.random.SeedSequence:
+        """The task's seed: the job seed, its point's values and its realisation; never its place or rank.
+
+        ``spawn_key`` is four 32-bit words of a digest of the point's parameters that affect the
+        seed (:meth:`_canonical`), then the realisation index.  Tasks that differ only in the
+        method (parameters with ``affects_seed=False``) share their initial condition; a point
+        draws the same numbers whatever else the sweep holds and in whatever order it is written.
         """
-        seeded = [name for name in self.sweep if solver.parameter(name).affects_seed]
-        index = np.unravel_index(task.point, self.sweep_shape) if self.sweep else ()
-        by_name = dict(zip(self.sweep, index))
-        shape = [len(self.sweep[name]) for name in seeded]
-        seed_point = int(np.ravel_multi_index([by_name[n] for n in seeded], shape)) if seeded else 0
-        return np.random.SeedSequence(self.seed, spawn_key=(seed_point, task.realization))
+        words = np.frombuffer(_digest(self._canonical(task.point, seeded_only=True))[:16], dtype="<u4")
+        return np.random.SeedSequence(self.seed, spawn_key=(*(int(word) for word in words), task.realization))
+
+    @functools.cached_property
+    def _point_keys(self) -> list[bytes]:
+        return [_digest(self._canonical(point, seeded_only=False))[:KEY_BYTES] for point in range(self.n_points)]
+
+    def _canonical(self, point: int, seeded_only: bool) -> bytes:
+        """The point's parameters as canonical JSON: names sorted; a parameter at its default left out
+        (so a key added in a later version keeps every stream); an input file by its SHA-256, not its
+        path; ``seeded_only`` leaves out the choices of method (``affects_seed=False``)."""
+        params = self.point_parameters(point)
+        values = {}
+        for parameter in self.solver.parameters:
+            value = params[parameter.name]
+            if (seeded_only and not parameter.affects_seed) or (value == parameter.default and
+                                                                 type(value) is type(parameter.default)):
+                continue
+            values[parameter.name] = self._content(parameter.name, value) if parameter.is_file else value
+        for table in (table for table in self.solver.tables if table.name in self.tables):
+            files = [p.name for p in table.parameters if p.is_file]
+            values[f"[[{table.name}]]"] = [{key: self._content(f"[[{table.name}]] {key}", value) if key in files
+                                            else value for key, value in entry.items()}
+                                           for entry in self.tables[table.name]]
+        return json.dumps(values, sort_keys=True, separators=(",", ":")).encode()
+
+    def _content(self, key: str, path: str) -> str:
+        """An input file as the seed sees it: its content's SHA-256 (no file: the empty path)."""
+        return f"sha256:{self.input_hashes[key][path]}" if path else ""
 
     @property
     def input_attributes(self) -> dict[str, str]:
@@ -253,10 +306,13 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
     n_points = math.prod(len(values) for values in sweep.values())
     if n_points * realizations > MAX_TASKS:
         fail(f"{n_points} parameter points x {realizations} realizations = {n_points * realizations} tasks; "
-             f"allowed: at most {MAX_TASKS} tasks (each writes a file); lower realizations or the [sweep]")
+             f"allowed: at most {MAX_TASKS} tasks; lower realizations or the [sweep]")
+    configurations = document.get("configurations", "all")
+    if configurations not in CONFIGURATIONS:
+        fail(f"configurations = {configurations!r}: allowed: {', '.join(repr(c) for c in CONFIGURATIONS)}")
     job = Job(name=name, kind=kind, seed=seed, realizations=realizations, output=Path(out),
               fixed=fixed, sweep=sweep, text=text, input_hashes=_input_hashes(solver, fixed, sweep, tables, fail),
-              units=units, tables=tables)
+              units=units, tables=tables, configurations=configurations, solver=solver)
     for point in range(job.n_points):
         params = job.point_parameters(point)
         try:
@@ -481,3 +537,7 @@ def _toml_integer(value: int) -> str:
 def _toml_string(text: str) -> str:
     """A TOML basic string: JSON's escapes are TOML's, and TOML also escapes DEL."""
     return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
+
+
+def _digest(data: bytes) -> bytes:
+    return hashlib.sha256(data).digest()

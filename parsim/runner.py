@@ -1,10 +1,13 @@
 """Turn a job into tasks, run them over the MPI ranks, and assemble the dataset.
 
 Every rank calls :func:`run_job`.  Rank 0 checks the output location, locks
-the output folder, prepares it and finds the tasks that earlier runs have not
-finished; the scheduler hands those out, costliest first; each task's rank
-writes its HDF5 file; rank 0 then assembles the netCDF dataset from the task
-files, so a resumed job gives exactly the dataset of an uninterrupted one.
+the output folder, prepares it, merges its row files and finds the tasks that
+earlier runs have not finished (by their point's values, so a grown job computes
+only its new tasks); the scheduler hands those out, costliest first; each task's
+rank writes its HDF5 task file if the job keeps its configuration, then appends
+its statistics to the rank's row file; rank 0 then assembles the netCDF dataset
+from the rows, so a resumed or grown job gives exactly the dataset of an
+uninterrupted run of the job as written now.
 
 Failures end every rank: the phases of rank 0 alone go through
 :func:`~parsim.parallel.collective.on_root`, which hands their error to every
@@ -30,11 +33,12 @@ from parsim.errors import JobError, describe_exception
 from parsim.interrupts import ending_on_signals
 from parsim.job import Job, Task, parse_job
 from parsim.output.collect import collect_output
-from parsim.output.dataset import build_dataset, write_dataset
+from parsim.output.dataset import build_dataset, row_layout, task_rows, write_dataset
 from parsim.output.folder import OutputFolder
 from parsim.output.location import check_output_location
 from parsim.output.lock import FolderLock
-from parsim.output.snapshot import read_statistics, write_task_file
+from parsim.output.rows import RowWriter, merge_rows
+from parsim.output.snapshot import write_task_file
 from parsim.parallel.collective import on_root
 from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
 from parsim.progress import TaskProgress
@@ -72,8 +76,15 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
     try:
         with ending_on_signals(lambda number: _end_on_signal(number, job, folder, lock, writing, comm)):
             pending = on_root(comm, lambda: _claim(job, folder, lock))
-            _run_pending(job, pending, folder, writing, comm, progress and rank == 0, ranks_per_task, limit)
-            return on_root(comm, lambda: _write_outputs(job, folder, comm.Get_size(), ranks_per_task))
+            done, computing = _run_pending(job, pending, folder, writing, comm, progress and rank == 0,
+                                           ranks_per_task, limit)
+            start = time.perf_counter()
+            outputs = on_root(comm, lambda: _write_outputs(job, folder, comm.Get_size(), ranks_per_task))
+            if progress and rank == 0 and done:
+                print(f"parsim: {done} tasks in {computing:.1f} s ({done / computing:.0f} tasks/s on "
+                      f"{comm.Get_size()} ranks), dataset written in {time.perf_counter() - start:.1f} s",
+                      file=sys.stderr, flush=True)
+            return outputs
     finally:
         if rank == 0:
             lock.release()
@@ -86,20 +97,22 @@ def time_reserve(job: Job) -> float:
 
 
 def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
-    """Rank 0: lock and prepare the output folder; the tasks still to run, in the job's order."""
+    """Rank 0: lock and prepare the output folder, merge its row files; the tasks still to run, in the job's order."""
     check_output_location(folder.root)
     folder.create()
     lock.acquire()
     try:
         folder.prepare(job, _stored_job(folder))
-        return [task for task in job.tasks() if not folder.is_finished(task)]
+        found = task_rows(job, merge_rows(folder.rows, row_layout(job, job.solver), job.name))
+        return [task for task, row in zip(job.tasks(), found) if row < 0]
     except BaseException:
         lock.release()
         raise
 
 
 def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: threading.Lock, comm: MPI.Comm,
-                 progress: bool, ranks_per_task: int, time_limit: TimeLimit | None) -> None:
+                 progress: bool, ranks_per_task: int, time_limit: TimeLimit | None) -> tuple[int, float]:
+    """Run the ``pending`` tasks; on rank 0, how many finished and in how many seconds (after the warm-up)."""
     solver = SOLVERS[job.kind]
     warm_up(job, pending, progress)
     point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
@@ -109,6 +122,8 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
     to_do = set(pending)
     bar = TaskProgress(job.name, [point_costs[task.point] for task in pending],
                        [point_costs[task.point] for task in job.tasks() if task not in to_do], progress)
+    rows = RowWriter(folder.rows, row_layout(job, solver), job.name, comm.Get_rank())
+    finished = []
 
     def work(k: int, group: MPI.Comm) -> None:
         if not solver.decomposable:
@@ -120,17 +135,27 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
         if group.Get_rank() > 0:
             return
         with writing:
-            write_task_file(folder.task_path(task), result, task_attributes(job, task))
+            if job.keeps_configuration(task):
+                write_task_file(folder.task_path(task), result, task_attributes(job, task))
+            rows.append(task.key, task.realization, result.statistics)
 
     def describe_failure(k: int, error: Exception) -> str:
         task = pending[k]
         return (f"task {task.label} ({job.describe_point(task.point)}, realization {task.realization}) failed: "
                 f"{describe_exception(error)}")
 
-    run_group_tasks(comm, ranks_per_task, len(pending), work,
-                    on_finished=lambda k, rank: bar.task_finished(point_costs[pending[k].point]),
-                    describe_failure=describe_failure, time_limit=time_limit)
+    def on_finished(k: int, rank: int) -> None:
+        finished.append(k)
+        bar.task_finished(point_costs[pending[k].point])
+
+    start = time.perf_counter()
+    try:
+        run_group_tasks(comm, ranks_per_task, len(pending), work, on_finished=on_finished,
+                        describe_failure=describe_failure, time_limit=time_limit)
+    finally:
+        rows.close()  # before rank 0 reads the rows: a network file system shows a file's writes once it is closed
     bar.close()
+    return len(finished), time.perf_counter() - start
 
 
 def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult | None:
@@ -140,8 +165,7 @@ def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult | None:
     """
     solver = SOLVERS[job.kind]
     start = time.perf_counter()
-    result = solver.solve(job.point_parameters(task.point), np.random.default_rng(job.seed_sequence(task, solver)),
-                          comm)
+    result = solver.solve(job.point_parameters(task.point), np.random.default_rng(job.seed_sequence(task)), comm)
     if comm.Get_rank() > 0:
         return None
     result.statistics["wall_time"] = time.perf_counter() - start
@@ -150,10 +174,9 @@ def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult | None:
 
 def task_attributes(job: Job, task: Task) -> dict:
     """The root attributes of ``task``'s file: its parameters, input files, units and origin."""
-    seed = job.seed_sequence(task, SOLVERS[job.kind])
     return {**job.point_parameters(task.point), **job.table_attributes, **job.input_attributes, **job.unit_attributes,
-            "job_name": job.name, "job_seed": job.seed, "spawn_key": list(seed.spawn_key), "point": task.point,
-            "realization": task.realization}
+            "job_name": job.name, "job_seed": job.seed, "spawn_key": list(job.seed_sequence(task).spawn_key),
+            "task": task.label, "realization": task.realization}
 
 
 def warm_up(job: Job, pending: list[Task], announce: bool) -> None:
@@ -183,12 +206,12 @@ def warm_up(job: Job, pending: list[Task], announce: bool) -> None:
 
 def _write_outputs(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task: int) -> tuple[Path | None, bool]:
     """Rank 0: the dataset if every task has finished, else the partial dataset of those that have."""
-    if all(folder.is_finished(task) for task in job.tasks()):
-        dataset = build_dataset(job, SOLVERS[job.kind], lambda task: read_statistics(folder.task_path(task)),
-                                mpi_size, ranks_per_task)
-        write_dataset(dataset, folder.dataset)
+    rows = folder.finished_rows(job)
+    found = task_rows(job, rows) >= 0
+    if found.all():
+        write_dataset(build_dataset(job, SOLVERS[job.kind], rows, mpi_size, ranks_per_task), folder.dataset)
         return folder.dataset, True
-    if not any(folder.is_finished(task) for task in job.tasks()):
+    if not found.any():
         return None, False
     return collect_output(folder.root)[0], False
 
@@ -211,7 +234,7 @@ def _end_on_signal(number: signal.Signals, job: Job, folder: OutputFolder, lock:
         return
     time.sleep(WRITE_SETTLE_SECONDS)
     lock.release()
-    kept = sum(folder.is_finished(task) for task in job.tasks())
+    kept = int((task_rows(job, folder.finished_rows(job)) >= 0).sum())
     what = "interrupted" if number == signal.SIGINT else f"stopped by {number.name}"
     print(f"\nparsim: {what}; {kept} of {len(job.tasks())} tasks kept, run the same command to finish",
           file=sys.stderr, flush=True)

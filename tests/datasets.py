@@ -8,7 +8,10 @@ import h5py
 import numpy as np
 import xarray as xr
 
-from parsim.output.dataset import MEASURED_ATTRIBUTE, VOLATILE_ATTRIBUTES
+from parsim.job import parse_job
+from parsim.output.dataset import MEASURED_ATTRIBUTE, VOLATILE_ATTRIBUTES, row_layout
+from parsim.output.rows import read_rows, row_files
+from parsim.solvers import SOLVERS
 from tests.mpi import parsim_command
 
 
@@ -52,3 +55,19 @@ box_levels = 4
 n_spheres = [40, 80]
 volume_fraction = [0.1, 0.2]
 """
+
+
+def unfinish(out: Path, tasks: list[tuple[int, int]]) -> None:
+    """Make the output folder ``out`` look as if ``tasks`` (point, realisation) of its job had not finished:
+    their rows and task files gone, as if a kill had come before them."""
+    job = parse_job((out / "job.toml").read_text(), SOLVERS)
+    layout = row_layout(job, job.solver)
+    rows = read_rows(out / "rows", layout)
+    gone = {(job.point_key(point), realization) for point, realization in tasks}
+    kept = rows[[(key.tobytes(), int(r)) not in gone for key, r in zip(rows["key"], rows["realization"])]]
+    for path in row_files(out / "rows"):
+        path.unlink()
+    (out / "rows" / "kept.rows").write_bytes(layout.header(job.name) + kept.tobytes())
+    for task in job.tasks():
+        if (task.point, task.realization) in tasks:
+            (out / "tasks" / f"{task.label}.h5").unlink(missing_ok=True)

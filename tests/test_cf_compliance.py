@@ -18,7 +18,7 @@ from compliance_checker.suite import CheckSuite
 
 import parsim
 from parsim.job import SI_PREFIXES, UNIT_KEYS, parse_job
-from parsim.output.dataset import REFERENCES, all_statistics, build_dataset
+from parsim.output.dataset import REFERENCES, all_statistics, build_dataset, row_layout
 from parsim.output.snapshot import OUTPUT_SCHEMA
 from parsim.solver import flag_value, resolve_units
 from parsim.solvers import SOLVERS
@@ -176,7 +176,8 @@ def dataset_of(body: str) -> xr.Dataset:
     solver = SOLVERS["aggregation"]
     observable = solver.coordinates(job.fixed)
     zeros = {s.name: np.zeros([len(observable[d].values) for d in s.dims]) for s in all_statistics(solver)}
-    return build_dataset(job, solver, lambda task: zeros, mpi_size=1, ranks_per_task=1)
+    return build_dataset(job, solver, row_layout(job, solver).rows([(task, zeros) for task in job.tasks()]),
+                         mpi_size=1, ranks_per_task=1)
 
 
 def test_ts_keys_are_coordinates_only_of_jobs_with_ts_tasks():

@@ -8,7 +8,7 @@ import xarray as xr
 
 from parsim.cli import main
 from parsim.output.lock import FolderLock
-from tests.datasets import run_serial, small_aggregation_job
+from tests.datasets import run_serial, small_aggregation_job, unfinish
 
 JOB = small_aggregation_job("growing", seed=4)
 
@@ -24,13 +24,12 @@ def finished(tmp_path_factory):
 
 @pytest.fixture
 def half_done(finished, tmp_path):
-    """A copy of the finished folder without its dataset and without five of its twelve task files."""
+    """A copy of the finished folder without its dataset and with five of its twelve tasks unfinished."""
     out = tmp_path / "out"
     shutil.copytree(finished, out)
     (out / "growing.nc").unlink()
-    removed = ["p0000_r0001", "p0001_r0000", "p0001_r0002", "p0003_r0000", "p0003_r0001"]
-    for label in removed:
-        (out / "tasks" / f"{label}.h5").unlink()
+    removed = [(0, 1), (1, 0), (1, 2), (3, 0), (3, 1)]
+    unfinish(out, removed)
     return out, removed
 
 
@@ -49,8 +48,8 @@ def test_the_finished_tasks_are_those_of_the_whole_job(finished, half_done, caps
         completed = partial["completed"]
         assert int(completed.sum()) == 7 and completed.attrs["flag_meanings"] == "unfinished finished"
         stacked = completed.stack(task=("n_spheres", "volume_fraction", "realization"))
-        for label, done in zip(_labels(whole), stacked.values):
-            assert bool(done) == (label not in removed)
+        for task, done in zip(_tasks(whole), stacked.values):
+            assert bool(done) == (task not in removed)
         for name in ("fractal_dimension", "n_collisions", "pair_distribution"):
             finished_part = partial[name].where(completed == 1)
             # every finished task's numbers are the whole job's, every unfinished one is NaN
@@ -74,8 +73,7 @@ def test_nothing_to_collect_is_one_line(tmp_path, capsys):
     assert "no task of job 'growing' has finished yet" in capsys.readouterr().err
 
 
-def _labels(dataset):
-    """Task labels in the order of the stacked (sweep..., realization) dimensions."""
+def _tasks(dataset):
+    """(point, realisation) of each task in the order of the stacked (sweep..., realization) dimensions."""
     points = len(dataset["n_spheres"]) * len(dataset["volume_fraction"])
-    return [f"p{point:04d}_r{realization:04d}" for point in range(points)
-            for realization in range(len(dataset["realization"]))]
+    return [(point, realization) for point in range(points) for realization in range(len(dataset["realization"]))]

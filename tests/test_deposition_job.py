@@ -7,9 +7,9 @@ import pytest
 import xarray as xr
 
 from parsim.errors import JobError
-from parsim.job import parse_job
+from parsim.job import load_job, parse_job
 from parsim.solvers import SOLVERS
-from tests.datasets import reproducible_part, run_serial, snapshot_arrays
+from tests.datasets import reproducible_part, run_serial, snapshot_arrays, unfinish
 from tests.mpi import parsim_command, run_mpi
 
 JOB = """
@@ -65,7 +65,7 @@ def test_resumed_job_recomputes_the_same_sediment(two_ranks, tmp_path):
 
     job, two = two_ranks
     shutil.copytree(two, tmp_path / "out")
-    (tmp_path / "out" / "tasks" / "p0001_r0001.h5").unlink()  # as if killed before this task finished
+    unfinish(tmp_path / "out", [(1, 1)])  # as if killed before this task finished
     (tmp_path / "out" / "sediments.nc").unlink()
     result = run_mpi(parsim_command("run", str(job), "--output", str(tmp_path / "out"), "--quiet"))
     assert result.returncode == 0, result.stderr
@@ -87,7 +87,8 @@ def test_sediment_statistics_and_layout(two_ranks):
         assert {"shape_size", "box_length", "sphere_radius", "trial_angle"} <= set(ds.coords)
         assert not {"shape_spacing", "semi_axis_x", "exponent_vertical", "shape_spheres", "agglomerate_file",
                     "wall_contact", "drop_radius", "size_spread"} & set(ds.coords)
-    arrays = snapshot_arrays(two / "tasks" / "p0001_r0000.h5")
+    spiky = load_job(two / "job.toml", SOLVERS).tasks()[2]  # point 1 (shape = "spiky"), realisation 0
+    arrays = snapshot_arrays(two / "tasks" / f"{spiky.label}.h5")
     particle = arrays["spheres/particle"]
     assert np.all(np.diff(particle) >= 0) and particle[-1] == 149  # deposition order, contiguous
     assert arrays["particles/rotation"].shape == (150, 4) and arrays["particles/event_counts"].shape == (150, 13)
@@ -99,7 +100,7 @@ def test_agglomerates_from_an_aggregation_task(tmp_path):
     aggregation.write_text('name = "clusters"\nkind = "aggregation"\nseed = 1\nrealizations = 1\n'
                            '[parameters]\nn_spheres = 25\nvolume_fraction = 0.2\n')
     assert run_serial("run", str(aggregation), "--output", str(tmp_path / "clusters"), "--quiet").returncode == 0
-    cluster = tmp_path / "clusters" / "tasks" / "p0000_r0000.h5"
+    (cluster,) = (tmp_path / "clusters" / "tasks").glob("*.h5")
     deposition = tmp_path / "deposition.toml"
     deposition.write_text(f'name = "flakes"\nkind = "deposition"\nseed = 2\nrealizations = 1\n[parameters]\n'
                           f'n_particles = 30\nshape = "agglomerate"\nagglomerate_file = "{cluster}"\n'
@@ -112,7 +113,9 @@ def test_agglomerates_from_an_aggregation_task(tmp_path):
     # Another cluster at the same path: resuming would mix two particles in one dataset, so it is refused.
     aggregation.write_text(aggregation.read_text().replace("seed = 1", "seed = 2"))
     assert run_serial("run", str(aggregation), "--output", str(tmp_path / "other"), "--quiet").returncode == 0
-    shutil.copy(tmp_path / "other" / "tasks" / "p0000_r0000.h5", cluster)
+    (other,) = (tmp_path / "other" / "tasks").glob("*.h5")
+    assert other.name == cluster.name  # one point, hence one label: the seed is not part of it
+    shutil.copy(other, cluster)
     resumed = run_serial("run", str(deposition), "--output", str(tmp_path / "flakes"), "--quiet")
     assert resumed.returncode == 2, resumed.stderr
     assert f"holds results computed from a different agglomerate_file '{cluster}'" in resumed.stderr

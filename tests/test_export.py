@@ -325,29 +325,31 @@ def command_line(*arguments):
 
 
 def test_command_writes_the_chosen_task_into_the_export_folder(outputs, tmp_path, capsys):
-    assert run_export(command_line(outputs["deposition"], "--task", "p0000_r0001", "--format", "csv")) == 0
-    path = outputs["deposition"] / "export" / "p0000_r0001.csv"
+    first, chosen = sorted((outputs["deposition"] / "tasks").glob("*.h5"))[:2]
+    assert run_export(command_line(outputs["deposition"], "--task", chosen.stem, "--format", "csv")) == 0
+    path = outputs["deposition"] / "export" / f"{chosen.stem}.csv"
     assert capsys.readouterr().out.split() == [str(path)]
-    close(read_agglomerate(path)[0], truth(outputs["deposition"] / "tasks" / "p0000_r0001.h5").position)
+    close(read_agglomerate(path)[0], truth(chosen).position)
     run_export(command_line(outputs["deposition"], "--format", "extxyz", "--out", tmp_path))  # a folder: LABEL.xyz
-    assert capsys.readouterr().out.split() == [str(tmp_path / "p0000_r0000.xyz")]
+    assert capsys.readouterr().out.split() == [str(tmp_path / f"{first.stem}.xyz")]
     with pytest.raises(SystemExit):  # one task or all of them
-        command_line(outputs["deposition"], "--task", "p0000_r0001", "--all", "--format", "csv")
+        command_line(outputs["deposition"], "--task", chosen.stem, "--all", "--format", "csv")
 
 
 @pytest.mark.parametrize("arguments, message", [
     (["--format", "pdb"], "unknown export format 'pdb'; allowed: extxyz, lammps, vtk, csv, yade, particles"),
-    (["--format", "csv", "--task", "p0009_r0000"], "no task 'p0009_r0000' in "),
-    (["--format", "particles"], "format 'particles' is the particle table of a deposition, and p0000_r0000 is an "
+    (["--format", "csv", "--task", "0123456789abcdef_r0000"], "no task '0123456789abcdef_r0000' in "),
+    (["--format", "particles"], "format 'particles' is the particle table of a deposition, and {task} is an "
                                 "aggregation task; its clusters have no orientation: use one of extxyz, lammps, "
                                 "vtk, csv, yade"),
 ])
 def test_errors_name_the_allowed_values(outputs, arguments, message):
+    (task,) = [path.stem for path in (outputs["aggregation"] / "tasks").glob("*.h5")]
     with pytest.raises(JobError) as error:
         run_export(command_line(outputs["aggregation"], *arguments))
-    assert message in str(error.value) and "\n" not in str(error.value)
+    assert message.format(task=task) in str(error.value) and "\n" not in str(error.value)
     if "--task" in arguments:
-        assert str(error.value).endswith("--task takes one of: p0000_r0000 (or give --all)")
+        assert str(error.value).endswith(f"--task takes one of: {task} (or give --all)")
 
 
 def test_a_folder_that_is_not_parsim_output_is_refused(tmp_path):

@@ -16,7 +16,7 @@ import parsim
 from parsim.agglomerate_file import read_agglomerate
 from parsim.errors import JobError
 from parsim.job import load_job, parse_job
-from parsim.output.dataset import all_statistics, build_dataset
+from parsim.output.dataset import all_statistics, build_dataset, row_layout
 from parsim.output.folder import OutputFolder
 from parsim.output.snapshot import OUTPUT_SCHEMA, read_statistics, write_task_file
 from parsim.solver import Configuration, TaskResult
@@ -66,13 +66,37 @@ def test_grid_order_and_defaults():
     assert job.fixed["mass"] == 1.0 and job.fixed["contact_factor"] == 2.1  # paper defaults
 
 
-def test_seed_depends_on_task_indices_only_and_not_on_the_method():
-    job = parse(BASE.replace("[sweep]", '[sweep]\nmethod = ["ed"]'))
-    solver = SOLVERS["aggregation"]
-    keys = {task: job.seed_sequence(task, solver).spawn_key for task in job.tasks()}
-    assert len(set(keys.values())) == len(keys)  # distinct streams
-    # method is the first (slowest) sweep axis but does not count in the seed's point index
-    assert keys[job.tasks()[-1]] == (5, 1)
+def test_a_task_draws_from_its_values_not_from_its_place_in_the_sweep():
+    job = parse(BASE.replace("[sweep]", '[sweep]\nmethod = ["ed", "ts"]'))
+    streams = {(task.point, task.realization): job.seed_sequence(task).generate_state(4).tobytes()
+               for task in job.tasks()}
+    by_values = {}
+    for (point, realization), stream in streams.items():
+        params = job.point_parameters(point)
+        by_values[params["method"], params["n_spheres"], params["volume_fraction"], realization] = stream
+    # the method does not enter the stream; every other point and realisation has its own
+    for (method, n, phi, r), stream in by_values.items():
+        assert stream == by_values["ed", n, phi, r]
+    assert len(set(streams.values())) == len(streams) // 2
+    # another sweep, in another order, with the fixed keys written otherwise: the same numbers per point
+    other = parse(BASE.replace("radius = 0.2", "mass = 1.0\nradius = 0.20").replace(
+        "n_spheres = [100, 400]\nvolume_fraction = [0.1, 0.2, 0.3]",
+        "volume_fraction = [0.3, 0.25, 0.1]\nn_spheres = [900, 400]"))
+    shared = 0
+    for task in other.tasks():
+        params = other.point_parameters(task.point)
+        key = ("ed", params["n_spheres"], params["volume_fraction"], task.realization)
+        if key in by_values:
+            assert other.seed_sequence(task).generate_state(4).tobytes() == by_values[key]
+            shared += 1
+    assert shared == 2 * 2  # n_spheres 400 at volume fractions 0.1 and 0.3, two realisations each
+
+
+def test_the_keys_of_points_are_distinct_and_name_the_method():
+    job = parse(BASE.replace("[sweep]", '[sweep]\nmethod = ["ed", "ts"]'))
+    keys = [job.point_key(point) for point in range(job.n_points)]
+    assert len(set(keys)) == job.n_points == 12
+    assert len({task.label for task in job.tasks()}) == len(job.tasks())
 
 
 @pytest.mark.parametrize("change, message", [
@@ -128,10 +152,9 @@ def test_units_label_the_job_and_leave_its_random_streams():
                                                                   '\nmass_unit = "ng"'))
     assert default.unit_attributes == {"length_unit": "m", "time_unit": "s", "mass_unit": "kg"}
     assert chosen.unit_attributes == {"length_unit": "um", "time_unit": "ms", "mass_unit": "ng"}
-    solver = SOLVERS["aggregation"]
     for task in default.tasks():
-        np.testing.assert_array_equal(default.seed_sequence(task, solver).generate_state(4),
-                                      chosen.seed_sequence(task, solver).generate_state(4))
+        np.testing.assert_array_equal(default.seed_sequence(task).generate_state(4),
+                                      chosen.seed_sequence(task).generate_state(4))
     assert default.fixed == chosen.fixed and default.sweep == chosen.sweep
 
 
@@ -194,7 +217,8 @@ def test_the_dataset_names_its_input_files(tmp_path):
     solver = SOLVERS["deposition"]
     observable = solver.coordinates(job.fixed)
     zeros = {s.name: np.zeros([len(observable[d].values) for d in s.dims]) for s in all_statistics(solver)}
-    dataset = build_dataset(job, solver, lambda task: zeros, mpi_size=1, ranks_per_task=1)
+    rows = row_layout(job, solver).rows([(task, zeros) for task in job.tasks()])
+    dataset = build_dataset(job, solver, rows, mpi_size=1, ranks_per_task=1)
     assert dataset.attrs["input_files"] == f"{flake} {sha256(flake)}"
 
 
@@ -250,12 +274,9 @@ def resumed(tmp_path, first: str, second: str) -> None:
 @pytest.mark.parametrize("change, message", [
     (("seed = 7", "seed = 8"), "differs in: seed (7 then, 8 now);"),
     (("radius = 0.2", "radius = 0.3"), "differs in: [parameters] radius (0.2 then, 0.3 now);"),
-    (("[100, 400]", "[100]"), "differs in: [sweep] n_spheres ([100, 400] then, [100] now);"),
     (("radius = 0.2", "radius = 0.2\nmass = 2.0"), "differs in: [parameters] mass (1.0 then, 2.0 now);"),
-    (("seed = 7\nrealizations = 2", "seed = 8\nrealizations = 3"),
-     "differs in: seed (7 then, 8 now), realizations (2 then, 3 now);"),
-    (("radius = 0.2\n[sweep]", "[sweep]\nradius = [0.2]"),
-     "differs in: [parameters] radius (0.2 then, unset now), [sweep] radius (unset then, [0.2] now);"),
+    (("seed = 7\nrealizations = 2", 'seed = 8\nrealizations = 3\nlength_unit = "mm"'),
+     "differs in: seed (7 then, 8 now), length_unit ('m' then, 'mm' now);"),
     (("seed = 7", 'seed = 7\nlength_unit = "mm"'), "differs in: length_unit ('m' then, 'mm' now);"),
 ])
 def test_resume_names_each_key_that_differs(tmp_path, change, message):
@@ -300,8 +321,8 @@ def folder_with_a_task(tmp_path) -> tuple[OutputFolder, Path]:
 def test_task_files_record_the_parsim_version_and_the_output_schema(tmp_path):
     _, path = folder_with_a_task(tmp_path)
     with h5py.File(path) as file:
-        assert file.attrs["parsim_version"] == parsim.__version__ == "0.3.0"
-        assert file.attrs["parsim_output_schema"] == OUTPUT_SCHEMA == 3
+        assert file.attrs["parsim_version"] == parsim.__version__ == "0.4.0"
+        assert file.attrs["parsim_output_schema"] == OUTPUT_SCHEMA == 4
     assert read_statistics(path) == {"box_length": 1.0}
 
 

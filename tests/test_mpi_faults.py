@@ -163,7 +163,7 @@ def test_disk_full_while_task_files_are_written(job, finished, small_disk):
     task_pages = max(-(-path.stat().st_size // PAGE) for path in (finished / "tasks").glob("*.h5"))
     fill((3 + 3 * task_pages) * PAGE)  # the lock, inputs.json and job.toml, and three task files
     result, _ = run_into(job, mount / "out")
-    assert_one_line(result, 1, "no space left on", str(mount / "out" / "tasks"), "task p")
+    assert_one_line(result, 1, "no space left on", str(mount / "out" / "tasks"), ", realization ")
     kept = list((mount / "out" / "tasks").glob("*.h5"))
     assert 1 <= len(kept) < 12
     resumed = run_serial("run", str(job), "--output", str(mount / "out"), "--quiet")

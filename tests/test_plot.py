@@ -16,7 +16,7 @@ import xarray as xr
 from parsim.cli import main
 from parsim.errors import PlotError
 from parsim.job import parse_job
-from parsim.output.dataset import all_statistics, build_dataset, write_dataset
+from parsim.output.dataset import all_statistics, build_dataset, row_layout, write_dataset
 from parsim.output.folder import OutputFolder
 from parsim.output.snapshot import write_task_file
 from parsim.plots import FIGURES, FIGURES_BY_KIND, aggregation, deposition
@@ -107,10 +107,11 @@ def write_outputs(root, job_text, configuration):
     job = parse_job(job_text, SOLVERS, output=root)
     folder = OutputFolder(root, job.name)
     folder.prepare(job, None)
-    write_dataset(build_dataset(job, SOLVERS[job.kind], lambda task: statistics(job, task), 1, 1), folder.dataset)
+    rows = row_layout(job, job.solver).rows([(task, statistics(job, task)) for task in job.tasks()])
+    write_dataset(build_dataset(job, SOLVERS[job.kind], rows, 1, 1), folder.dataset)
     rng = np.random.default_rng(0)
     for task in job.tasks()[:2]:
-        attrs = {**job.point_parameters(task.point), **job.table_attributes, "point": task.point,
+        attrs = {**job.point_parameters(task.point), **job.table_attributes, "task": task.label,
                  "realization": task.realization}
         write_task_file(folder.task_path(task), TaskResult(statistics(job, task), configuration(rng)), attrs)
     return root
@@ -211,13 +212,14 @@ def test_a_folder_without_a_job_is_refused(tmp_path, capsys):
 
 
 def test_the_task_option_picks_the_pictured_task(aggregation_output, tmp_path, capsys):
-    fig = aggregation.cluster(open_dataset(aggregation_output), aggregation_output / "tasks" / "p0000_r0001.h5")
-    assert "task p0000_r0001: method = ed, n_spheres = 100, volume_fraction = 0.1" in fig.get_suptitle()
+    label = parse_job(AGGREGATION_JOB, SOLVERS).tasks()[1].label
+    fig = aggregation.cluster(open_dataset(aggregation_output), aggregation_output / "tasks" / f"{label}.h5")
+    assert f"task {label}: method = ed, n_spheres = 100, volume_fraction = 0.1" in fig.get_suptitle()
     assert "2 clusters" in fig.get_suptitle()
-    assert main(["plot", str(aggregation_output), "--figure", "cluster", "--task", "p0000_r0001",
+    assert main(["plot", str(aggregation_output), "--figure", "cluster", "--task", label,
                  "--out", str(tmp_path / "c")]) == 0
     assert_images([tmp_path / "c.png", tmp_path / "c.pdf"])
-    assert main(["plot", str(aggregation_output), "--figure", "cluster", "--task", "p0009_r0000"]) == 2
+    assert main(["plot", str(aggregation_output), "--figure", "cluster", "--task", "0123456789abcdef_r0000"]) == 2
     assert "no task file" in capsys.readouterr().err
 
 

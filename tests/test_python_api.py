@@ -231,7 +231,8 @@ def assert_same_arrays(mine: dict, theirs: dict) -> None:
 
 def test_deposit_is_the_first_task_of_the_job_with_its_seed_bit_for_bit(deposition_job, tmp_path):
     cubes = parsim.deposit(seed=5, **DEPOSITION_PARAMETERS)
-    task_file = deposition_job / "tasks" / "p0000_r0000.h5"
+    label = cubes.job.tasks()[0].label  # the task's label follows its values, whatever job it is in
+    task_file = deposition_job / "tasks" / f"{label}.h5"
     assert_same_arrays(cubes.configuration.arrays, snapshot_arrays(task_file))
     with xr.open_dataset(deposition_job / "cubes.nc") as dataset:
         row = dataset.isel(realization=0).load()
@@ -240,13 +241,13 @@ def test_deposit_is_the_first_task_of_the_job_with_its_seed_bit_for_bit(depositi
     unmeasured = {name for name in statistics if name not in measured(row)}
     assert_same_arrays({name: cubes.result.statistics[name] for name in unmeasured},
                        {name: statistics[name] for name in unmeasured})
-    other = snapshot_arrays(deposition_job / "tasks" / "p0000_r0001.h5")
+    other = snapshot_arrays(deposition_job / "tasks" / f"{label[:-5]}r0001.h5")
     assert not np.array_equal(cubes.configuration.arrays["spheres/position"], other["spheres/position"])
 
     mine = cubes.export(tmp_path / "mine.xyz", "extxyz")
-    theirs = export_output(deposition_job, "extxyz", task="p0000_r0000", out=tmp_path / "theirs.xyz")
+    theirs = export_output(deposition_job, "extxyz", task=label, out=tmp_path / "theirs.xyz")
     assert mine == [tmp_path / "mine.xyz"] and mine[0].read_bytes() == theirs[0].read_bytes()
-    assert cubes.export(tmp_path, "csv") == [tmp_path / "p0000_r0000.csv"]
+    assert cubes.export(tmp_path, "csv") == [tmp_path / f"{label}.csv"]
 
 
 def test_aggregate_equals_the_jobs_tasks_and_the_method_keeps_the_initial_condition(tmp_path, monkeypatch):
@@ -273,7 +274,7 @@ def test_aggregate_equals_the_jobs_tasks_and_the_method_keeps_the_initial_condit
 
     both = parsim.run({**DISCS, "sweep": {"method": ["ed", "ts"]}}, output=tmp_path, progress=False)
     for point, method in enumerate(("ed", "ts")):
-        task_file = tmp_path / "tasks" / f"p{point:04d}_r0000.h5"
+        task_file = tmp_path / "tasks" / f"{outcomes[method].job.tasks()[0].label}.h5"
         assert_same_arrays(outcomes[method].configuration.arrays, snapshot_arrays(task_file))
         # the parameters only TS reads are coordinates of the job's dataset, not of the ED task's row
         row = both.isel(method=point, realization=0)

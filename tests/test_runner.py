@@ -13,7 +13,9 @@ import pytest
 import xarray as xr
 
 import parsim
+from parsim.job import load_job
 from parsim.output.snapshot import OUTPUT_SCHEMA
+from parsim.solvers import SOLVERS
 from tests.datasets import reproducible_part, run_serial
 from tests.mpi import error_lines, kill_session, mpiexec, parsim_command, run_mpi
 
@@ -57,7 +59,9 @@ def test_dataset_layout(quickstart_two_ranks):
 
 @pytest.mark.mpi
 def test_task_snapshot_layout(quickstart_two_ranks):
-    with h5py.File(quickstart_two_ranks / "tasks" / "p0004_r0001.h5") as snapshot:
+    job = load_job(QUICKSTART, SOLVERS)
+    task = job.tasks()[4 * job.realizations + 1]  # n_spheres = 400, volume_fraction = 0.2, realisation 1
+    with h5py.File(quickstart_two_ranks / "tasks" / f"{task.label}.h5") as snapshot:
         n = snapshot["spheres/position"].shape[0]
         assert snapshot["spheres/position"].shape == (n, 2) and snapshot["spheres/radius"].shape == (n,)
         assert snapshot["spheres/velocity"].shape == (n, 2) and snapshot["spheres/cluster"].dtype == np.int64
@@ -66,7 +70,9 @@ def test_task_snapshot_layout(quickstart_two_ranks):
         np.testing.assert_array_equal(snapshot.attrs["box_upper"], [length, length])
         assert list(snapshot.attrs["periodic"]) == [False, False]
         assert snapshot.attrs["n_spheres"] == n == 400 and snapshot.attrs["volume_fraction"] == 0.2
-        assert snapshot.attrs["job_seed"] == 20240611 and list(snapshot.attrs["spawn_key"]) == [4, 1]
+        assert snapshot.attrs["job_seed"] == 20240611 and snapshot.attrs["task"] == task.label
+        assert list(snapshot.attrs["spawn_key"]) == list(job.seed_sequence(task).spawn_key)
+        assert len(snapshot.attrs["spawn_key"]) == 5 and snapshot.attrs["spawn_key"][-1] == 1
         assert snapshot.attrs["parsim_version"] == parsim.__version__
         assert snapshot.attrs["parsim_output_schema"] == OUTPUT_SCHEMA
         units = [snapshot.attrs[key] for key in ("length_unit", "time_unit", "mass_unit")]
@@ -85,7 +91,7 @@ def test_killed_job_resumes_to_the_same_dataset(quickstart_two_ranks, tmp_path):
     finished = len(list(tasks.glob("*.h5")))
     assert 3 <= finished < 36, "the kill should land in the middle of the job"
     assert not (tmp_path / "quickstart.nc").exists()
-    (tasks / "p0000_r0000.h5.123.tmp").write_bytes(b"half-written")  # what a kill during a write leaves
+    (tasks / "0123456789abcdef_r0000.h5.123.tmp").write_bytes(b"half-written")  # what a kill during a write leaves
 
     result = run_mpi(parsim_command("run", QUICKSTART, "--output", str(tmp_path), "--quiet"))
     assert result.returncode == 0, result.stderr

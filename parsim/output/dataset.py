@@ -15,14 +15,14 @@ size, the ranks per task and the creation time.
 
 import datetime
 from pathlib import Path
-from typing import Callable
-
 import numpy as np
 import xarray as xr
 
 import parsim
-from parsim.job import Job, Task
+from parsim.errors import OutputError
+from parsim.job import Job
 from parsim.output.atomic import write_bytes_atomically
+from parsim.output.rows import RowLayout
 from parsim.output.snapshot import check_schema, provenance_attributes
 from parsim.solver import Solver, Statistic, resolve_units
 
@@ -48,41 +48,53 @@ def all_statistics(solver: Solver) -> tuple[Statistic, ...]:
     return (*solver.statistics, WALL_TIME)
 
 
-def build_dataset(job: Job, solver: Solver, statistics_of: Callable[[Task], dict | None], mpi_size: int,
-                  ranks_per_task: int, partial: bool = False) -> xr.Dataset:
-    """Assemble the dataset; ``statistics_of(task)`` gives one finished task's statistics.  A
-    ``partial`` dataset (:mod:`parsim.output.collect`) takes None for a task not finished yet:
-    its statistics are all floating point, NaN for such tasks."""
+def build_dataset(job: Job, solver: Solver, rows: np.ndarray, mpi_size: int, ranks_per_task: int,
+                  partial: bool = False) -> xr.Dataset:
+    """Assemble the dataset of ``job`` from task ``rows`` (:mod:`parsim.output.rows`, of :func:`row_layout`).
+
+    Each task of the job takes the row of its point key and realisation; rows of tasks the job no
+    longer has are left out.  A ``partial`` dataset (:mod:`parsim.output.collect`) may miss rows:
+    its statistics are all floating point, NaN for such tasks.
+    """
     coords = {**_sweep_coordinates(job, solver), **_observable_coordinates(job, solver),
               **_fixed_coordinates(job, solver)}
-    return xr.Dataset(_statistics_variables(job, solver, statistics_of, partial), coords=coords,
+    return xr.Dataset(_statistics_variables(job, solver, rows, partial), coords=coords,
                       attrs=_global_attributes(job, mpi_size, ranks_per_task))
 
 
-def _statistics_variables(job: Job, solver: Solver, statistics_of: Callable[[Task], dict | None],
-                          partial: bool) -> dict[str, xr.Variable]:
-    """One variable per statistic, dimensions (sweep..., realization, observable...)."""
+def row_layout(job: Job, solver: Solver) -> RowLayout:
+    """The record of one task of ``job``: every statistic, in its type and its observable shape."""
     observable = solver.coordinates(job.constants)
-    leading_shape = (*job.sweep_shape, job.realizations)
-    statistics = all_statistics(solver)
-    shapes = {s.name: leading_shape + tuple(len(observable[d].values) for d in s.dims) for s in statistics}
-    arrays = {s.name: np.full(shapes[s.name], np.nan) if partial else np.empty(shapes[s.name], dtype=s.dtype)
-              for s in statistics}
-    for task in job.tasks():
-        values = statistics_of(task)
-        if values is None and partial:
-            continue
-        index = (*np.unravel_index(task.point, job.sweep_shape), task.realization) if job.sweep else (task.realization,)
-        for s in statistics:
-            arrays[s.name][index] = values[s.name]
+    return RowLayout(tuple((s.name, s.dtype, tuple(len(observable[d].values) for d in s.dims))
+                           for s in all_statistics(solver)))
 
+
+def task_rows(job: Job, rows: np.ndarray) -> np.ndarray:
+    """For each task of ``job.tasks()``, the index of its row in ``rows``, -1 where there is none."""
+    found = {(key.tobytes(), int(r)): i for i, (key, r) in enumerate(zip(rows["key"], rows["realization"]))}
+    return np.array([found.get((task.key, task.realization), -1) for task in job.tasks()], dtype=np.int64)
+
+
+def _statistics_variables(job: Job, solver: Solver, rows: np.ndarray, partial: bool) -> dict[str, xr.Variable]:
+    """One variable per statistic, dimensions (sweep..., realization, observable...)."""
+    index = task_rows(job, rows)
+    missing = index < 0
+    if missing.any() and not partial:
+        raise OutputError(f"{int(missing.sum())} tasks of job '{job.name}' have no row of statistics; "
+                          "run the same command again to compute them")
+    leading_shape = (*job.sweep_shape, job.realizations)
     leading_dims = (*job.sweep, "realization")
     variables = {}
-    for s in statistics:
+    for s in all_statistics(solver):
+        column = rows[s.name][np.maximum(index, 0)] if len(rows) else np.zeros((len(index), *rows.dtype[s.name].shape))
+        if partial:
+            column = column.astype(np.float64)
+            column[missing] = np.nan
         attrs = {**_described(job, s.units, s.long_name), **s.attrs}
         if s.measured:
             attrs[MEASURED_ATTRIBUTE] = 1
-        variables[s.name] = xr.Variable(leading_dims + s.dims, arrays[s.name], attrs)
+        variables[s.name] = xr.Variable(leading_dims + s.dims, column.reshape(leading_shape + column.shape[1:]),
+                                        attrs)
     return variables
 
 

@@ -353,10 +353,11 @@ def _job_folder(output: Path) -> tuple[str, list[Path]]:
     if not (output / JOB_COPY).is_file():
         raise JobError(f"{output} is not a parsim output folder (no {JOB_COPY} in it); "
                        "give the folder a job wrote, its key 'output' or the --output of parsim run")
-    files = sorted((output / TASKS).glob("p*_r*.h5"))
+    files = sorted((output / TASKS).glob("*.h5"))
     if not files:
-        raise JobError(f"{output / TASKS} holds no task file yet: a task's file is written when it finishes "
-                       f"(parsim info {output} says how far the job got)")
+        raise JobError(f"{output / TASKS} holds no task file yet: a task's file is written when it finishes, if "
+                       f"the job keeps its configuration (key configurations; parsim info {output} says how far "
+                       "the job got)")
     return tomllib.loads((output / JOB_COPY).read_text()).get("name", output.name), files
 
 
@@ -409,7 +410,7 @@ def add_export_command(subparsers) -> None:
     export = subparsers.add_parser("export", help="write task files for OVITO, ParaView, LAMMPS, YADE, ASE")
     export.add_argument("output", type=Path, help="output folder of a job")
     which = export.add_mutually_exclusive_group()
-    which.add_argument("--task", metavar="LABEL", help="the task to export, e.g. p0003_r0001 (default: the first)")
+    which.add_argument("--task", metavar="LABEL", help="the task to export, its file name in OUTPUT/tasks without .h5 (default: the first)")
     which.add_argument("--all", action="store_true", help="export every task (vtk: with a .pvd collection)")
     export.add_argument("--format", required=True, metavar="FORMAT",
                         help="; ".join(f"{name} ({spec.readers})" for name, spec in FORMATS.items()))

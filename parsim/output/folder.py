@@ -2,25 +2,37 @@
 
 ::
 
-    <output>/job.toml               the job file as first run (resume refuses a different job)
-    <output>/inputs.json            SHA-256 of every input file the job names (resume refuses a changed one)
-    <output>/tasks/p0003_r0001.h5   one file per finished task (configuration + statistics)
-    <output>/<name>.nc              the dataset, written once every task has finished
+    <output>/job.toml                        the job file as last run
+    <output>/inputs.json                     SHA-256 of every input file the job has named (a changed one is refused)
+    <output>/rows/*.rows                     the statistics of the finished tasks (:mod:`parsim.output.rows`)
+    <output>/tasks/3fa9c01b2d4e5f60_r0001.h5 the final configuration of a task that keeps one (key ``configurations``)
+    <output>/<name>.nc                       the dataset, written once every task has finished
 
-A task is finished exactly when its file exists: files are written under a
-temporary name and renamed, so a killed run leaves only complete files, and
-running the same command again computes just the missing tasks.  A folder whose
-task files record another output schema (:data:`~parsim.output.snapshot.OUTPUT_SCHEMA`)
-is refused, with one line saying so.
+A task is finished exactly when its row is in a row file: a task file is written first, under
+a temporary name then renamed, and the row is appended in one write, so a killed run leaves only
+complete files and rows, and running the same command again computes just the missing tasks.
+
+A folder may be run again with a grown or shrunk job: more or fewer realisations, values added
+to or removed from the sweep, a key moved between ``[parameters]`` and ``[sweep]``, another
+``configurations``.  Tasks are found by their point's values (:class:`~parsim.job.Task`), so
+only the new ones are computed, and the dataset shows the job as written now; rows and files of
+tasks it no longer has stay.  Another name, kind, seed, unit, array of tables or fixed parameter
+value, or an input file whose content changed, is refused naming the key.  A folder whose files
+record another output schema (:data:`~parsim.output.snapshot.OUTPUT_SCHEMA`) is refused, with
+one line saying so.
 """
 
 import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from parsim.errors import JobError, OutputError
 from parsim.job import UNIT_KEYS, Job, Task, parse_job
 from parsim.output.atomic import TEMPORARY_SUFFIX, written_atomically
+from parsim.output.dataset import row_layout
+from parsim.output.rows import ROWS, read_header, read_rows, row_files
 from parsim.output.snapshot import check_schema, read_schema_attributes
 
 JOB_COPY = "job.toml"
@@ -34,61 +46,73 @@ class OutputFolder:
         self.job_copy = self.root / JOB_COPY
         self.inputs = self.root / INPUTS
         self.tasks = self.root / TASKS
+        self.rows = self.root / ROWS
         self.dataset = self.root / f"{job_name}.nc"
 
     def task_path(self, task: Task) -> Path:
         return self.tasks / f"{task.label}.h5"
 
-    def is_finished(self, task: Task) -> bool:
-        return self.task_path(task).exists()
+    def finished_rows(self, job: Job) -> np.ndarray:
+        """The rows of every finished task in the folder (:func:`parsim.output.rows.read_rows`), of this
+        job's or not."""
+        return read_rows(self.rows, row_layout(job, job.solver))
 
     def create(self) -> None:
-        """Make the folder and its ``tasks`` folder; a failure is an :class:`OutputError` naming the path."""
-        try:
-            self.tasks.mkdir(parents=True, exist_ok=True)
-        except OSError as error:
-            raise OutputError.from_os_error(error, self.tasks, doing="create") from None
+        """Make the folder, its ``tasks`` and ``rows`` folders; a failure is an :class:`OutputError` naming the path."""
+        for folder in (self.tasks, self.rows):
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as error:
+                raise OutputError.from_os_error(error, folder, doing="create") from None
 
     def prepare(self, job: Job, stored_job: Job | None) -> None:
-        """Create the folder for ``job``, or check that it holds the same job; remove stale temporaries.
+        """Create the folder for ``job``, or check that ``job`` may run where ``stored_job`` ran; remove
+        stale temporaries.
 
-        ``stored_job`` is the job read from :attr:`job_copy` (None if absent).  The hashes
-        of the job's input files are recorded in :attr:`inputs`, and compared on a resume.
+        ``stored_job`` is the job read from :attr:`job_copy` (None if absent).  ``job`` becomes
+        the folder's copy; the hashes of its input files join those recorded in :attr:`inputs`.
         """
+        recorded = {}
         if stored_job is not None:
             self.check_schema()
             different = _differences(stored_job, job)
             if different:
                 raise JobError(
                     f"output folder {self.root} holds results of a different job, which differs in: "
-                    f"{', '.join(different)}; give another output folder "
-                    f"(key 'output' or option --output) or remove {self.root}")
-            self._check_inputs(job)
-        self.tasks.mkdir(parents=True, exist_ok=True)
-        if stored_job is None or not self.inputs.exists():
+                    f"{', '.join(different)}; a job may only add or remove [sweep] values and realizations: "
+                    f"give another output folder (key 'output' or option --output) or remove {self.root}")
+            recorded = self._recorded_inputs()
+            self._check_inputs(job, recorded)
+        self.create()
+        inputs = {key: {**recorded.get(key, {}), **job.input_hashes.get(key, {})}
+                  for key in {**recorded, **job.input_hashes}}
+        if stored_job is None or inputs != recorded:
             with written_atomically(self.inputs) as temporary:
-                temporary.write_text(json.dumps(job.input_hashes, indent=2) + "\n")
-        if stored_job is None:
+                temporary.write_text(json.dumps(inputs, indent=2) + "\n")
+        if stored_job is None or stored_job.text != job.text:
             with written_atomically(self.job_copy) as temporary:
                 temporary.write_text(job.text)
         for leftover in self.root.rglob(f"*{TEMPORARY_SUFFIX}"):
             leftover.unlink(missing_ok=True)
 
     def check_schema(self) -> None:
-        """Refuse a folder whose task files record another output schema than this parsim's.
+        """Refuse a folder whose files record another output schema than this parsim's.
 
-        One task file stands for all: every run in a folder is refused unless its schema is
-        the folder's (and the dataset assembly checks each file as it reads it).
+        One row file and one task file stand for all: every run in a folder is refused unless its
+        schema is the folder's (and reading the rows checks each row file).
         """
-        first = next(self.tasks.glob("p*_r*.h5"), None) if self.tasks.is_dir() else None
-        if first is not None:
-            check_schema(read_schema_attributes(first), f"output folder {self.root}", self.root)
+        first_rows = next(iter(row_files(self.rows)), None)
+        if first_rows is not None:
+            check_schema(read_header(first_rows), f"output folder {self.root}", self.root)
+        first_task = next(self.tasks.glob("*.h5"), None) if self.tasks.is_dir() else None
+        if first_task is not None:
+            check_schema(read_schema_attributes(first_task), f"output folder {self.root}", self.root)
 
-    def _check_inputs(self, job: Job) -> None:
-        """Refuse to resume ``job`` if an input file recorded by the first run has changed."""
-        for key, files in self._recorded_inputs().items():
+    def _check_inputs(self, job: Job, recorded: dict[str, dict[str, str]]) -> None:
+        """Refuse ``job`` if an input file it names, recorded by an earlier run, has changed."""
+        for key, files in recorded.items():
             for path, then in files.items():
-                now = job.input_hashes[key][path]  # the same job names the same files
+                now = job.input_hashes.get(key, {}).get(path, then)
                 if now != then:
                     raise JobError(
                         f"output folder {self.root} holds results computed from a different {key} {path!r} "
@@ -123,21 +147,24 @@ _UNSET = object()
 
 
 def _identity(job: Job) -> dict[str, Any]:
-    """What must agree between a run and its resume, key by key (the file's comments and layout need not)."""
-    return {"name": job.name, "kind": job.kind, "seed": job.seed, "realizations": job.realizations,
+    """What must agree between two runs in one folder, key by key (the file's comments and layout,
+    the realisations, the swept values and ``configurations`` need not)."""
+    return {"name": job.name, "kind": job.kind, "seed": job.seed,
             **{unit.key: job.units[unit.quantity] for unit in UNIT_KEYS},
             **{f"[parameters] {key}": value for key, value in job.fixed.items()},
-            **{f"[sweep] {key}": values for key, values in job.sweep.items()},
             **{f"[[{key}]]": list(entries) for key, entries in job.tables.items()}}
 
 
 def _differences(then: Job, now: Job) -> list[str]:
     """Each key whose value differs between the stored job and ``now``, with both values.
 
-    Jobs of different kinds have different parameters: only their top-level keys are compared.
+    A parameter fixed in one of them and swept in the other is growing or shrinking, not a
+    difference.  Jobs of different kinds have different parameters: only their top-level keys
+    are compared.
     """
     old, new = _identity(then), _identity(now)
-    keys = [key for key in {**old, **new} if old.get(key, _UNSET) != new.get(key, _UNSET)]
+    swept = {f"[parameters] {key}" for key in (*then.sweep, *now.sweep)}
+    keys = [key for key in {**old, **new} if key not in swept and old.get(key, _UNSET) != new.get(key, _UNSET)]
     if "kind" in keys:
         keys = [key for key in keys if not key.startswith("[")]
     return [f"{key} ({_shown(old, key)} then, {_shown(new, key)} now)" for key in keys]

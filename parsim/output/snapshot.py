@@ -22,13 +22,14 @@ from parsim.solver import Configuration, TaskResult
 
 STATISTICS_GROUP = "statistics"
 
-OUTPUT_SCHEMA = 3
+OUTPUT_SCHEMA = 4
 """Version of the layout of the outputs (task files and dataset), recorded in both.
 
 Raise it with any change that would make parsim misread the outputs of an earlier
 version, e.g. a statistic added or a coordinate coded differently.  Schema 2 (parsim
 0.2.0): UDUNITS units, a numeric ``component``, the schema and version recorded.  Schema 3
-(parsim 0.3.0): the deposition's species, structure and substrate outputs.
+(parsim 0.3.0): the deposition's species, structure and substrate outputs.  Schema 4 (parsim 0.4.0):
+random streams and task files named by the values of a task's point, statistics in row files.
 """
 SCHEMA_ATTRIBUTE = "parsim_output_schema"
 VERSION_ATTRIBUTE = "parsim_version"

@@ -1,12 +1,16 @@
 """Dynamic task scheduling over MPI ranks, with every rank computing.
 
-Tasks ``0 .. n_tasks-1`` are handed out one at a time, in index order (the
-caller orders them by decreasing cost), to whichever rank asks first.  No rank
-is a pure master: rank 0 computes tasks in its main thread while a small server
-thread answers the other ranks' requests.  The solvers' numba kernels release
-the GIL, so the server answers within about a millisecond even while rank 0
-computes.  This keeps every core busy when task costs differ 100-fold, which a
-static split cannot.
+Tasks ``0 .. n_tasks-1`` are handed out in index order (the caller orders them
+by decreasing cost), to whichever rank asks first.  No rank is a pure master:
+rank 0 computes tasks in its main thread while a small server thread answers
+the other ranks' requests.  The solvers' numba kernels release the GIL, so the
+server answers within about a millisecond even while rank 0 computes.  This
+keeps every core busy when task costs differ 100-fold, which a static split
+cannot.  Tasks go out one at a time while they are long; once the tasks
+finished so far show that they take less than :data:`CHUNK_SECONDS`, a request
+gets a chunk of consecutive tasks that takes about that long (never more than a
+share of what is left, so that the ranks end together), and 10⁵ tasks of a
+millisecond need a few thousand requests, not 10⁵.
 
 Groups (:func:`run_group_tasks`): the ranks can also be split into groups of K
 consecutive ranks that run each task together.  The group leaders share the
@@ -37,6 +41,8 @@ from parsim.parallel.collective import POLL_SECONDS, FailureReport, wait_for
 REQUEST_TAG = 1
 REPLY_TAG = 2
 NO_MORE_TASKS = -1
+CHUNK_SECONDS = 0.05
+"""How long the chunk of short tasks handed out at one request should take to compute."""
 
 
 class TaskFailed(ParsimError):
@@ -48,7 +54,8 @@ class TimeLimit:
 
     A task may start when now + the longest task so far + ``reserve`` <= the deadline, ``seconds``
     after this object was made (the run's start); once refused, every later task is (the clock and
-    the longest task only grow).  A task's duration runs from its start to the report of its end.
+    the longest task only grow).  A task's duration runs from its start to the report of its end;
+    a chunk of short tasks (:data:`CHUNK_SECONDS`) counts as one task, named by its first index.
     Thread-safe: rank 0's two threads share it.
     """
 
@@ -74,21 +81,40 @@ class TimeLimit:
 
 
 class _TaskCounter:
-    """The next task index, shared by rank 0's two threads; none once the time limit refuses one."""
+    """The next chunk of tasks, shared by rank 0's two threads; none once the time limit refuses one."""
 
-    def __init__(self, n_tasks: int, time_limit: TimeLimit | None):
+    def __init__(self, n_tasks: int, n_ranks: int, time_limit: TimeLimit | None):
         self._next = 0
         self._n_tasks = n_tasks
+        self._n_ranks = n_ranks
         self._time_limit = time_limit
+        self._tasks_timed = 0
+        self._seconds = 0.0
         self._lock = threading.Lock()
 
-    def take(self) -> int:
+    def take(self) -> tuple[int, int] | None:
+        """(first task, number of tasks) of the next chunk, or None."""
         with self._lock:
-            if self._next >= self._n_tasks or (self._time_limit and not self._time_limit.may_start(self._next)):
+            remaining = self._n_tasks - self._next
+            if remaining <= 0 or (self._time_limit and not self._time_limit.may_start(self._next)):
                 self._next = self._n_tasks
-                return NO_MORE_TASKS
-            self._next += 1
-            return self._next - 1
+                return None
+            first, count = self._next, self._chunk(remaining)
+            self._next += count
+            return first, count
+
+    def timed(self, count: int, seconds: float) -> None:
+        """Record that ``count`` tasks took ``seconds`` to compute."""
+        with self._lock:
+            self._tasks_timed += count
+            self._seconds += seconds
+
+    def _chunk(self, remaining: int) -> int:
+        """As many tasks as take about CHUNK_SECONDS, at the mean time of the tasks so far; 1 before any."""
+        if self._seconds <= 0.0:
+            return 1
+        fits = int(CHUNK_SECONDS * self._tasks_timed / self._seconds)
+        return max(1, min(fits, remaining // (2 * self._n_ranks)))
 
 
 def run_tasks(
@@ -113,52 +139,59 @@ def run_tasks(
     describe_failure = describe_failure or _traceback_message
     finished_lock = threading.Lock()
 
-    def finished(k: int, rank: int) -> None:
-        if time_limit is not None:
-            time_limit.task_finished(k)
-        if on_finished is not None:
-            with finished_lock:
-                on_finished(k, rank)
-
     if comm.Get_size() == 1:
         for k in range(n_tasks):
             if time_limit is not None and not time_limit.may_start(k):
                 break
             try:
                 work(k)
-                finished(k, 0)
             except Exception as error:  # noqa: BLE001 - raised with the task's description
                 raise TaskFailed(describe_failure(k, error)) from error
+            if time_limit is not None:
+                time_limit.task_finished(k)
+            if on_finished is not None:
+                on_finished(k, 0)
         return
 
     sched = comm.Dup()  # private tags: the scheduler never sees other messages
     report = FailureReport(sched)
+    counter = _TaskCounter(n_tasks, sched.Get_size(), time_limit)
 
-    def run_one(k: int) -> None:
-        try:
-            work(k)
-            if sched.Get_rank() == 0:
-                finished(k, 0)
-        except Exception as error:  # noqa: BLE001 - every failure must end the job with its message
-            report.fail(f"{describe_failure(k, error)} (on rank {comm.Get_rank()})")
+    def run_chunk(first: int, count: int) -> tuple[int, int, float]:
+        start = time.perf_counter()
+        for k in range(first, first + count):
+            try:
+                work(k)
+            except Exception as error:  # noqa: BLE001 - every failure must end the job with its message
+                report.fail(f"{describe_failure(k, error)} (on rank {comm.Get_rank()})")
+        return first, count, time.perf_counter() - start
+
+    def finished(chunk: tuple[int, int, float], rank: int) -> None:
+        """Rank 0, either thread: the chunk's tasks have finished on ``rank``."""
+        first, count, seconds = chunk
+        counter.timed(count, seconds)
+        if time_limit is not None:
+            time_limit.task_finished(first)
+        if on_finished is not None:
+            with finished_lock:
+                for k in range(first, first + count):
+                    on_finished(k, rank)
 
     try:
         if sched.Get_rank() == 0:
-            counter = _TaskCounter(n_tasks, time_limit)
             server = threading.Thread(target=_serve, args=(sched, counter, finished, report), daemon=True)
             server.start()
-            while (k := counter.take()) != NO_MORE_TASKS:
-                run_one(k)
+            while (chunk := counter.take()) is not None:
+                finished(run_chunk(*chunk), 0)
             server.join()
         else:
             done = None
             while True:
                 sched.send(done, dest=0, tag=REQUEST_TAG)
-                k = sched.recv(source=0, tag=REPLY_TAG)
-                if k == NO_MORE_TASKS:
+                chunk = sched.recv(source=0, tag=REPLY_TAG)
+                if chunk is None:
                     break
-                run_one(k)
-                done = k
+                done = run_chunk(*chunk)
     finally:
         report.free()
         sched.Free()
@@ -238,9 +271,9 @@ def _receive_task(group: MPI.Comm) -> int:
     return int(index[0])
 
 
-def _serve(sched: MPI.Comm, counter: _TaskCounter, finished: Callable[[int, int], None],
+def _serve(sched: MPI.Comm, counter: _TaskCounter, finished: Callable[[tuple[int, int, float], int], None],
            report: FailureReport) -> None:
-    """Rank 0's server thread: answer each request with the next task, until every rank is told to stop."""
+    """Rank 0's server thread: answer each request with the next chunk, until every rank is told to stop."""
     try:
         still_asking = sched.Get_size() - 1
         status = MPI.Status()
@@ -252,9 +285,9 @@ def _serve(sched: MPI.Comm, counter: _TaskCounter, finished: Callable[[int, int]
             rank = status.Get_source()
             if done is not None:
                 finished(done, rank)
-            k = counter.take()
-            sched.send(k, dest=rank, tag=REPLY_TAG)
-            if k == NO_MORE_TASKS:
+            chunk = counter.take()
+            sched.send(chunk, dest=rank, tag=REPLY_TAG)
+            if chunk is None:
                 still_asking -= 1
     except Exception as error:  # noqa: BLE001 - a dead server would leave ranks waiting forever
         report.fail(f"the task server on rank 0 failed: {describe_exception(error)}")

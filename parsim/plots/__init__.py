@@ -98,12 +98,14 @@ def _open(path: Path) -> xr.Dataset:
 
 def _task_file(tasks: Path, label: str | None) -> Path:
     """The task file pictured: ``label``'s, or the first one."""
+    files = sorted(tasks.glob("*.h5"))
+    if not files:
+        raise PlotError(f"the pictures need task files, and {tasks} holds none (a job with configurations = "
+                        "\"none\" keeps none)")
     if label is not None:
         path = tasks / f"{label}.h5"
         if not path.exists():
-            raise PlotError(f"no task file {path}; --task takes a label such as p0000_r0000 (the files in {tasks})")
+            raise PlotError(f"no task file {path}; --task takes the name of a file in {tasks} without .h5, "
+                            f"such as {files[0].stem}")
         return path
-    files = sorted(tasks.glob("p*_r*.h5"))
-    if not files:
-        raise PlotError(f"the pictures need task files, and {tasks} holds none")
     return files[0]
