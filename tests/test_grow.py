@@ -129,6 +129,9 @@ def test_configurations_choose_the_task_files_and_never_the_numbers(tmp_path, ke
     assert len(saved) == files and all(path.stem.endswith("_r0000") for path in saved)
     assert {path.name for path in saved} <= {path.name for path in (tmp_path / "every" / "tasks").glob("*.h5")}
     xr.testing.assert_identical(chosen.drop_attrs(), every.drop_attrs())
+    if keep == "none":  # a picture of a task says why it cannot be drawn
+        drawn = run_serial("plot", str(tmp_path / keep), "--figure", "cluster")
+        assert drawn.returncode == 2 and 'holds none (a job with configurations = "none" keeps none)' in drawn.stderr
 
 
 def test_a_cut_off_or_damaged_row_is_computed_again(tmp_path):
@@ -139,6 +142,7 @@ def test_a_cut_off_or_damaged_row_is_computed_again(tmp_path):
     size = row_layout(job, job.solver).dtype.itemsize
     data[-size - 10] ^= 0xFF  # a bit flipped in the third row
     path.write_bytes(bytes(data[:-size // 2]))  # and the fourth cut off, as a kill in its write would leave it
+    (path.parent / "rank00001-00000000.rows").write_bytes(data[:20])  # a file killed as it was created
     info = run_serial("info", str(tmp_path / "out"))
     assert "tasks finished: 2 of 4" in info.stdout
     (tmp_path / "out" / "growing.nc").unlink()

@@ -18,7 +18,8 @@ from parsim.errors import JobError
 from parsim.job import load_job, parse_job
 from parsim.output.dataset import all_statistics, build_dataset, row_layout
 from parsim.output.folder import OutputFolder
-from parsim.output.snapshot import OUTPUT_SCHEMA, read_statistics, write_task_file
+from parsim.output.rows import read_rows
+from parsim.output.snapshot import OUTPUT_SCHEMA, write_task_file
 from parsim.solver import Configuration, TaskResult
 from parsim.solvers import SOLVERS
 
@@ -323,7 +324,7 @@ def test_task_files_record_the_parsim_version_and_the_output_schema(tmp_path):
     with h5py.File(path) as file:
         assert file.attrs["parsim_version"] == parsim.__version__ == "0.4.0"
         assert file.attrs["parsim_output_schema"] == OUTPUT_SCHEMA == 4
-    assert read_statistics(path) == {"box_length": 1.0}
+        assert file["statistics/box_length"][()] == 1.0
 
 
 @pytest.mark.parametrize("recorded, found", [
@@ -345,8 +346,20 @@ def test_a_folder_of_another_output_schema_is_refused_in_one_line(tmp_path, reco
     message = str(refused.value)
     assert "\n" not in message and message.endswith(f"into another output folder (key 'output' or option "
                                                      f"--output) or after removing {root}")
-    with pytest.raises(JobError, match=re.escape(f"task file {path} was written by {found}")):
-        read_statistics(path)  # the dataset assembly checks each file, not with a KeyError
+
+
+def test_a_row_file_of_another_output_schema_is_refused_naming_it(tmp_path):
+    job = parse(BASE)
+    layout = row_layout(job, job.solver)
+    header = json.loads(layout.header(job.name))
+    header["parsim_output_schema"] = OUTPUT_SCHEMA - 1
+    path = tmp_path / "rows" / "old.rows"
+    path.parent.mkdir()
+    zeros = {name: np.zeros(shape) for name, _, shape in layout.fields}
+    path.write_bytes((json.dumps(header) + "\n").encode() + layout.rows([(job.tasks()[0], zeros)]).tobytes())
+    with pytest.raises(JobError, match=re.escape(f"row file {path} was written by an older parsim (output schema "
+                                                 f"{OUTPUT_SCHEMA - 1})")):
+        read_rows(path.parent, layout)  # reading the rows checks each file
 
 
 def test_supplementary_initial_condition_needs_no_volume_fraction():

@@ -5,7 +5,7 @@ import time
 import pytest
 from mpi4py import MPI
 
-from parsim.parallel.scheduler import TaskFailed, run_tasks
+from parsim.parallel.scheduler import CHUNK_SECONDS, TaskFailed, _TaskCounter, run_tasks
 from tests.mpi import run_mpi
 
 PROBE = "tests/scripts/scheduler_probe.py"
@@ -58,3 +58,32 @@ def test_failure_on_any_rank_ends_the_job(tmp_path):
     assert result.returncode != 0
     assert "synthetic failure in task 5" in result.stderr
     assert time.perf_counter() - start < 25
+
+
+def test_short_tasks_go_out_in_chunks_of_about_chunk_seconds_and_long_ones_alone():
+    counter = _TaskCounter(10_000, n_ranks=2, time_limit=None)
+    assert counter.take() == (0, 1)  # nothing timed yet: one task
+    counter.timed(1, 0.2)  # longer than CHUNK_SECONDS
+    assert counter.take() == (1, 1)
+    counter.timed(999, 0.8 - 0.2)  # now 1000 tasks in 0.8 s: 0.8 ms each
+    first, count = counter.take()
+    assert first == 2 and count == int(CHUNK_SECONDS / 0.8e-3)
+    small = _TaskCounter(10, n_ranks=2, time_limit=None)
+    small.timed(100, 0.01)
+    assert small.take() == (0, 2)  # never more than a share of what is left: 10 // (2 x 2)
+    assert [small.take() for _ in range(5)] == [(2, 2), (4, 1), (5, 1), (6, 1), (7, 1)]
+
+
+@pytest.mark.mpi
+def test_many_tiny_tasks_go_out_in_chunks_each_once(tmp_path):
+    costs = [0.0005] * 4000
+    result = run_mpi([PROBE, str(tmp_path / "rec"), ",".join(map(str, costs))])
+    assert result.returncode == 0, result.stderr  # the probe checks that rank 0 heard of every task
+    records = read_records(tmp_path / "rec", 2)
+    assert sorted(k for k, *_ in records) == list(range(len(costs)))
+    chunks = 0
+    for rank in (0, 1):
+        mine = sorted(k for k, r, *_ in records if r == rank)
+        assert len(mine) > 500, (rank, len(mine))  # both ranks computed
+        chunks += 1 + sum(1 for a, b in zip(mine, mine[1:]) if b != a + 1)
+    assert chunks < len(costs) / 10, chunks

@@ -101,9 +101,10 @@ class OutputFolder:
         One row file and one task file stand for all: every run in a folder is refused unless its
         schema is the folder's (and reading the rows checks each row file).
         """
-        first_rows = next(iter(row_files(self.rows)), None)
+        headers = (read_header(path) for path in row_files(self.rows))
+        first_rows = next((header for header in headers if header is not None), None)
         if first_rows is not None:
-            check_schema(read_header(first_rows), f"output folder {self.root}", self.root)
+            check_schema(first_rows, f"output folder {self.root}", self.root)
         first_task = next(self.tasks.glob("*.h5"), None) if self.tasks.is_dir() else None
         if first_task is not None:
             check_schema(read_schema_attributes(first_task), f"output folder {self.root}", self.root)

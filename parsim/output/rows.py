@@ -88,6 +88,7 @@ class RowWriter:
         record = self.layout.record(key, realization, statistics)
         if self._descriptor is None:
             self._open()
+            record = self.layout.header(self.job_name) + record  # a file holds its header before any record
         self._write(record)
 
     def close(self) -> None:
@@ -109,7 +110,6 @@ class RowWriter:
             self._descriptor = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
         except OSError as error:
             raise OutputError.from_os_error(error, self.path, doing="create") from None
-        self._write(self.layout.header(self.job_name))
 
     def _write(self, data: bytes) -> None:
         try:
@@ -157,13 +157,16 @@ def merge_rows(folder: Path, layout: RowLayout, job_name: str) -> np.ndarray:
     return rows
 
 
-def read_header(path: Path) -> dict:
-    """The header of a row file; a file that is not one is a :class:`JobError` naming it."""
+def read_header(path: Path) -> dict | None:
+    """The header of a row file; None for a file cut off before its header's end (a kill as it was
+    created).  A file that is not a row file is a :class:`JobError` naming it."""
     try:
         with open(path, "rb") as file:
             line = file.readline(MAX_HEADER_BYTES)
     except OSError as error:
         raise OutputError.from_os_error(error, path, doing="read") from None
+    if not line.endswith(b"\n") and len(line) < MAX_HEADER_BYTES:
+        return None
     try:
         header = json.loads(line)
         if header.get("format") != FORMAT:
@@ -176,6 +179,8 @@ def read_header(path: Path) -> dict:
 
 def _read_file(path: Path, layout: RowLayout) -> np.ndarray:
     header = read_header(path)
+    if header is None:
+        return np.zeros(0, dtype=layout.dtype)
     check_schema(header, f"row file {path}", path.parent.parent)
     if [(name, kind, tuple(shape)) for name, kind, shape in header["fields"]] != list(layout.fields):
         raise JobError(f"row file {path} holds statistics laid out otherwise than this job's (another solver "

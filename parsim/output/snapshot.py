@@ -5,8 +5,8 @@ solver's other arrays (``spheres/velocity``, ``spheres/cluster``, ``links``,
 ``spheres/particle``, ...); root attributes ``box_lower``, ``box_upper``,
 ``periodic``, the task's parameters and seed, the job's units, ``parsim_version`` and
 ``parsim_output_schema``.  The group ``statistics`` holds one dataset per statistic
-of the task: it is what the job's netCDF dataset is assembled from, so a finished
-task file is also the resume record of its task.
+of the task, so that a task file describes its task alone; the job's dataset is
+assembled from the row files (:mod:`parsim.output.rows`).
 """
 
 import io
@@ -83,18 +83,6 @@ def write_task_file(path: Path, result: TaskResult, attrs: dict) -> None:
         for name, value in result.statistics.items():
             group.create_dataset(name, data=np.asarray(value))
     write_bytes_atomically(path, image.getbuffer())
-
-
-def read_statistics(path: Path) -> dict[str, np.ndarray]:
-    """The statistics of a finished task file; an unreadable file is an :class:`OutputError` naming it,
-    a file of another output schema a :class:`JobError` naming it and its output folder."""
-    try:
-        with h5py.File(path, "r") as file:
-            check_schema(file.attrs, f"task file {path}", path.parent.parent)
-            return {name: dataset[()] for name, dataset in file[STATISTICS_GROUP].items()}
-    except (OSError, KeyError) as error:
-        raise OutputError(f"cannot read the statistics of task file {path}: {error}; "
-                          "remove the file and run the same command again to recompute its task") from None
 
 
 def read_schema_attributes(path: Path) -> dict:

@@ -43,6 +43,8 @@ REPLY_TAG = 2
 NO_MORE_TASKS = -1
 CHUNK_SECONDS = 0.05
 """How long the chunk of short tasks handed out at one request should take to compute."""
+IDLE_POLL_SECONDS = 4e-3
+"""The longest pause of rank 0's server between two looks for requests (it starts at POLL_SECONDS)."""
 
 
 class TaskFailed(ParsimError):
@@ -277,10 +279,14 @@ def _serve(sched: MPI.Comm, counter: _TaskCounter, finished: Callable[[tuple[int
     try:
         still_asking = sched.Get_size() - 1
         status = MPI.Status()
+        pause = POLL_SECONDS
         while still_asking:
             if not sched.Iprobe(source=MPI.ANY_SOURCE, tag=REQUEST_TAG):
-                time.sleep(POLL_SECONDS)
+                time.sleep(pause)
+                # no request: look less often, up to IDLE_POLL_SECONDS, so that rank 0's own tasks keep the GIL
+                pause = min(2.0 * pause, IDLE_POLL_SECONDS)
                 continue
+            pause = POLL_SECONDS
             done = sched.recv(source=MPI.ANY_SOURCE, tag=REQUEST_TAG, status=status)
             rank = status.Get_source()
             if done is not None:
