@@ -11,7 +11,8 @@ from parsim.output.folder import open_output
 def describe_output(root: Path) -> str:
     folder, job = open_output(root)
     tasks = job.tasks()
-    done = int((task_rows(job, folder.finished_rows(job)) >= 0).sum())
+    rows = folder.finished_rows(job)
+    done = int((task_rows(job, rows) >= 0).sum())
 
     lines = [f"job '{job.name}' ({job.kind}), seed {job.seed}, {job.realizations} realizations per point"]
     for name, values in job.sweep.items():
@@ -21,6 +22,9 @@ def describe_output(root: Path) -> str:
     lines.append(f"tasks finished: {done} of {len(tasks)} ({100 * done / len(tasks):.0f} %)")
     if done < len(tasks):
         lines.append(f"  to finish: parsim run {folder.job_copy} --output {root}")
+    if len(rows) > done:
+        lines.append(f"  kept: {len(rows) - done} finished tasks of values or realisations the job no longer has "
+                     "(back in the dataset if the job is grown to them again)")
     if folder.dataset.exists():
         with xr.open_dataset(folder.dataset) as dataset:
             lines.append(f"dataset {folder.dataset} (written {dataset.attrs.get('date_created', '?')} "

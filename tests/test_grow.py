@@ -95,6 +95,8 @@ def test_a_shrunk_job_shows_the_job_as_written_now_and_keeps_the_rest(tmp_path):
     kept = run_into(tmp_path, "shrunk", shrunk, "out")
     assert_same_variables(kept, run_into(tmp_path, "shrunk", shrunk, "fresh"))
     assert rows_per_file(tmp_path / "out" / "rows", GROWN) == [18]  # nothing computed, nothing removed
+    info = run_serial("info", str(tmp_path / "out"))
+    assert "tasks finished: 4 of 4 (100 %)" in info.stdout and "kept: 14 finished tasks of values" in info.stdout
     assert len(list((tmp_path / "out" / "tasks").glob("*.h5"))) == 18
 
 
