@@ -66,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
                            ".png or .pdf, and the other format); without: the folder for every figure")
     plot.add_argument("--task", metavar="LABEL",
                       help="the task the pictures show (sediment, cluster): its file name in OUTPUT/tasks without .h5; "
-                      "default: the first")
+                      "default: the job's first task that has one")
 
     collect = commands.add_parser("collect", help="write the dataset of the tasks finished so far (the job may be "
                                   "running: collect takes no lock and writes beside the job's dataset)")

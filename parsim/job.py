@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from parsim.errors import JobError
+from parsim.parameters import Parameter
 from parsim.solver import Solver, TableArray
 
 SI_PREFIXES = ("Y", "Z", "E", "P", "T", "G", "M", "k", "h", "da", "d", "c", "m", "u", "n", "p", "f", "a", "z", "y")
@@ -191,16 +192,24 @@ class Job:
         values = {}
         for parameter in self.solver.parameters:
             value = params[parameter.name]
-            if (seeded_only and not parameter.affects_seed) or (value == parameter.default and
-                                                                 type(value) is type(parameter.default)):
+            if (seeded_only and not parameter.affects_seed) or _is_default(parameter, value):
                 continue
             values[parameter.name] = self._content(parameter.name, value) if parameter.is_file else value
         for table in (table for table in self.solver.tables if table.name in self.tables):
-            files = [p.name for p in table.parameters if p.is_file]
-            values[f"[[{table.name}]]"] = [{key: self._content(f"[[{table.name}]] {key}", value) if key in files
-                                            else value for key, value in entry.items()}
-                                           for entry in self.tables[table.name]]
+            declared = {p.name: p for p in table.parameters}
+            values[f"[[{table.name}]]"] = [
+                {key: self._content(f"[[{table.name}]] {key}", value) if declared[key].is_file else value
+                 for key, value in entry.items() if declared[key].affects_seed or not seeded_only}
+                for entry in self.table_entries(table.name)]
         return json.dumps(values, sort_keys=True, separators=(",", ":")).encode()
+
+    def table_entries(self, name: str) -> list[dict]:
+        """The entries of ``[[name]]`` as they count for the job's identity: a key of the table alone
+        (not a solver parameter an entry overrides) given at its default is left out."""
+        table = self.solver.table(name)
+        own = {p.name: p for p in table.parameters if p.name not in {q.name for q in self.solver.parameters}}
+        return [{key: value for key, value in entry.items() if key not in own or not _is_default(own[key], value)}
+                for entry in self.tables[name]]
 
     def _content(self, key: str, path: str) -> str:
         """An input file as the seed sees it: its content's SHA-256 (no file: the empty path)."""
@@ -261,7 +270,10 @@ def load_job(path: str | Path, solvers: dict[str, Solver], output: str | Path | 
     return parse_job(text, solvers, source=str(path), output=output)
 
 
-def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", output=None) -> Job:
+def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", output=None,
+              verify: bool = True) -> Job:
+    """Read and validate the job file ``text``.  ``verify=False`` reads the keys alone: no input
+    file is read and no point checked (for the copy of an earlier job, whose files may be gone)."""
     try:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
@@ -310,9 +322,12 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
     configurations = document.get("configurations", "all")
     if configurations not in CONFIGURATIONS:
         fail(f"configurations = {configurations!r}: allowed: {', '.join(repr(c) for c in CONFIGURATIONS)}")
-    job = Job(name=name, kind=kind, seed=seed, realizations=realizations, output=Path(out),
-              fixed=fixed, sweep=sweep, text=text, input_hashes=_input_hashes(solver, fixed, sweep, tables, fail),
-              units=units, tables=tables, configurations=configurations, solver=solver)
+    hashes = _input_hashes(solver, fixed, sweep, tables, fail) if verify else {}
+    job = Job(name=name, kind=kind, seed=seed, realizations=realizations, output=Path(out), fixed=fixed,
+              sweep=sweep, text=text, input_hashes=hashes, units=units, tables=tables,
+              configurations=configurations, solver=solver)
+    if not verify:
+        return job
     for point in range(job.n_points):
         params = job.point_parameters(point)
         try:
@@ -320,7 +335,19 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
             solver.check(params)
         except JobError as error:
             fail(f"sweep point {job.describe_point(point)}: {error}" if sweep else str(error))
+    _check_distinct_points(job, fail)
     return job
+
+
+def _check_distinct_points(job: Job, fail) -> None:
+    """Refuse two sweep points with one key: input files of the same content under two names."""
+    seen = {}
+    for point in range(job.n_points):
+        key = job.point_key(point)
+        if key in seen:
+            fail(f"sweep points {job.describe_point(seen[key])} and {job.describe_point(point)} are one point: "
+                 "their input files have the same content; give each file once")
+        seen[key] = point
 
 
 def _check_integers(value: Any, where: str, fail) -> None:
@@ -537,6 +564,10 @@ def _toml_integer(value: int) -> str:
 def _toml_string(text: str) -> str:
     """A TOML basic string: JSON's escapes are TOML's, and TOML also escapes DEL."""
     return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
+
+
+def _is_default(parameter: Parameter, value: Any) -> bool:
+    return value == parameter.default and type(value) is type(parameter.default)
 
 
 def _digest(data: bytes) -> bytes:

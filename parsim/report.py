@@ -4,15 +4,14 @@ from pathlib import Path
 
 import xarray as xr
 
-from parsim.output.dataset import task_rows
 from parsim.output.folder import open_output
 
 
 def describe_output(root: Path) -> str:
     folder, job = open_output(root)
     tasks = job.tasks()
-    rows = folder.finished_rows(job)
-    done = int((task_rows(job, rows) >= 0).sum())
+    rows, finished = folder.finished(job)
+    done = int(finished.sum())
 
     lines = [f"job '{job.name}' ({job.kind}), seed {job.seed}, {job.realizations} realizations per point"]
     for name, values in job.sweep.items():

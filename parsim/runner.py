@@ -39,7 +39,7 @@ from parsim.output.location import check_output_location
 from parsim.output.lock import FolderLock
 from parsim.output.rows import RowWriter, merge_rows
 from parsim.output.snapshot import write_task_file
-from parsim.parallel.collective import on_root
+from parsim.parallel.collective import on_root, wait_for
 from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
 from parsim.progress import TaskProgress
 from parsim.solver import TaskResult
@@ -70,7 +70,7 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
     on_root(comm, lambda: _check_ranks(comm, ranks_per_task))
     folder = OutputFolder(job.output, job.name)
     lock = FolderLock(folder.root)
-    writing = threading.Lock()  # held while a task file is written; a signal takes it to stop the writes
+    writing = threading.Lock()  # held while a task's file and row are written; a signal takes it to stop them
     rank = comm.Get_rank()
 
     try:
@@ -78,6 +78,7 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
             pending = on_root(comm, lambda: _claim(job, folder, lock))
             done, computing = _run_pending(job, pending, folder, writing, comm, progress and rank == 0,
                                            ranks_per_task, limit)
+            wait_for(comm.Ibarrier())  # every rank has closed its row file before rank 0 reads them
             start = time.perf_counter()
             outputs = on_root(comm, lambda: _write_outputs(job, folder, comm.Get_size(), ranks_per_task))
             if progress and rank == 0 and done:
@@ -153,7 +154,7 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
         run_group_tasks(comm, ranks_per_task, len(pending), work, on_finished=on_finished,
                         describe_failure=describe_failure, time_limit=time_limit)
     finally:
-        rows.close()  # before rank 0 reads the rows: a network file system shows a file's writes once it is closed
+        rows.close()  # a network file system shows a file's writes to other nodes once it is closed
     bar.close()
     return len(finished), time.perf_counter() - start
 
@@ -206,8 +207,7 @@ def warm_up(job: Job, pending: list[Task], announce: bool) -> None:
 
 def _write_outputs(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task: int) -> tuple[Path | None, bool]:
     """Rank 0: the dataset if every task has finished, else the partial dataset of those that have."""
-    rows = folder.finished_rows(job)
-    found = task_rows(job, rows) >= 0
+    rows, found = folder.finished(job)
     if found.all():
         write_dataset(build_dataset(job, SOLVERS[job.kind], rows, mpi_size, ranks_per_task), folder.dataset)
         return folder.dataset, True
@@ -218,11 +218,11 @@ def _write_outputs(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task
 
 def _end_on_signal(number: signal.Signals, job: Job, folder: OutputFolder, lock: FolderLock,
                    writing: threading.Lock, comm: MPI.Comm) -> None:
-    """A signal's last words: no more task files; rank 0 releases the lock and says what is kept.
+    """A signal's last words: no more task files or rows; rank 0 releases the lock and says what is kept.
 
-    Every rank stops writing task files at once (a write under way completes).
+    Every rank stops writing task files and rows at once (a write under way completes).
     Rank 0 waits a moment for the other ranks' writes under way, counts the
-    task files, prints the line and exits; the launcher then ends the other
+    finished tasks' rows, prints the line and exits; the launcher then ends the other
     ranks, which abort the job themselves if rank 0 did not get the signal.
     """
     writing.acquire()
@@ -234,7 +234,7 @@ def _end_on_signal(number: signal.Signals, job: Job, folder: OutputFolder, lock:
         return
     time.sleep(WRITE_SETTLE_SECONDS)
     lock.release()
-    kept = int((task_rows(job, folder.finished_rows(job)) >= 0).sum())
+    kept = int(folder.finished(job)[1].sum())
     what = "interrupted" if number == signal.SIGINT else f"stopped by {number.name}"
     print(f"\nparsim: {what}; {kept} of {len(job.tasks())} tasks kept, run the same command to finish",
           file=sys.stderr, flush=True)
@@ -257,7 +257,7 @@ def _stored_job(folder: OutputFolder) -> Job | None:
     if not folder.job_copy.exists():
         return None
     try:
-        return parse_job(folder.job_copy.read_text(), SOLVERS, source=str(folder.job_copy))
+        return parse_job(folder.job_copy.read_text(), SOLVERS, source=str(folder.job_copy), verify=False)
     except JobError as error:
         raise JobError(f"output folder {folder.root} holds a job file that is no longer valid ({error}); "
                        f"give another output folder or remove {folder.root}") from None

@@ -161,3 +161,25 @@ def test_a_job_grown_on_two_ranks_equals_the_grown_job_run_at_once(tmp_path):
         assert result.returncode == 0, result.stderr
     assert_same_variables(reproducible_part(tmp_path / "out" / "growing.nc"),
                           run_into(tmp_path, "grown", GROWN, "fresh"))
+
+
+def test_a_job_shrunk_away_from_an_input_file_that_is_gone_runs(tmp_path):
+    floors = [tmp_path / "one.csv", tmp_path / "two.csv"]
+    floors[0].write_text("x,y,z,r\n1,1,0,0.5\n")
+    floors[1].write_text("x,y,z,r\n2,2,0,0.5\n")
+    job = f"""
+name = "growing"
+kind = "deposition"
+seed = 3
+realizations = 1
+[parameters]
+n_particles = 5
+box_length = 6.0
+packing_samples = 1000
+[sweep]
+substrate = ["{floors[0]}", "{floors[1]}"]
+"""
+    both = run_into(tmp_path, "both", job, "out")
+    floors[1].unlink()  # the second sediment is done: its floor file may go
+    shrunk = run_into(tmp_path, "shrunk", job.replace(f', "{floors[1]}"', ""), "out")
+    xr.testing.assert_identical(shrunk.filling_height, both.filling_height.isel(substrate=[0]))

@@ -302,7 +302,7 @@ def test_resume_refuses_a_changed_input_file(tmp_path):
     flake.write_text(TWO_SPHERES.replace("1.5", "1.9"))
     with pytest.raises(JobError, match=re.escape(
             f"output folder {tmp_path / 'out'} holds results computed from a different agglomerate_file "
-            f"'{flake}' (its content changed since the first run: sha256 {before[:12]}... then, "
+            f"'{flake}' (its content changed since an earlier run: sha256 {before[:12]}... then, "
             f"{sha256(flake)[:12]}... now); give another output folder or restore the file")):
         folder.prepare(parse(text), parse(folder.job_copy.read_text()))
 
@@ -388,3 +388,37 @@ def test_every_parameter_is_in_the_job_reference():
             assert f"| `{parameter.name}` |" in reference, parameter.name
         for statistic in solver.statistics:
             assert f"`{statistic.name}`" in reference, statistic.name
+
+
+SPECIES = DEPOSITION + '''
+[[species]]
+name = "large"
+sphere_radius = 0.5
+[[species]]
+name = "small"
+sphere_radius = 0.25
+'''
+
+
+def test_a_table_key_written_at_its_default_is_the_same_job_and_the_same_stream(tmp_path):
+    plain, explicit = parse(SPECIES), parse(SPECIES.replace('name = "small"', 'name = "small"\nshare = 1.0'))
+    task, same = plain.tasks()[0], explicit.tasks()[0]
+    assert task.key == same.key
+    assert plain.seed_sequence(task).spawn_key == explicit.seed_sequence(same).spawn_key
+    folder = OutputFolder(tmp_path / "out", "d")
+    folder.prepare(plain, None)
+    folder.prepare(explicit, parse(folder.job_copy.read_text()))  # not a different job
+    # a species' own value of a job parameter is an override, never a default left out
+    override = parse(SPECIES.replace('name = "large"', 'name = "large"\nshape = "sphere"'))
+    assert override.table_entries("species")[0] == {"name": "large", "sphere_radius": 0.5, "shape": "sphere"}
+    assert override.tasks()[0].key != task.key
+
+
+def test_two_files_of_one_content_are_one_point_and_refused(tmp_path):
+    first, second = tmp_path / "a.csv", tmp_path / "b.csv"
+    first.write_text(TWO_SPHERES)
+    second.write_text(TWO_SPHERES)
+    with pytest.raises(JobError, match=re.escape(
+            f"sweep points agglomerate_file='{first}' and agglomerate_file='{second}' are one point: their input "
+            "files have the same content; give each file once")):
+        parse(DEPOSITION + f'shape = "agglomerate"\n[sweep]\nagglomerate_file = ["{first}", "{second}"]\n')

@@ -62,16 +62,16 @@ def test_failure_on_any_rank_ends_the_job(tmp_path):
 
 def test_short_tasks_go_out_in_chunks_of_about_chunk_seconds_and_long_ones_alone():
     counter = _TaskCounter(10_000, n_ranks=2, time_limit=None)
-    assert counter.take() == (0, 1)  # nothing timed yet: one task
+    assert counter.take() == (0, 1, None)  # nothing timed yet: one task
     counter.timed(1, 0.2)  # longer than CHUNK_SECONDS
-    assert counter.take() == (1, 1)
+    assert counter.take() == (1, 1, None)
     counter.timed(999, 0.8 - 0.2)  # now 1000 tasks in 0.8 s: 0.8 ms each
-    first, count = counter.take()
+    first, count, _ = counter.take()
     assert first == 2 and count == int(CHUNK_SECONDS / 0.8e-3)
     small = _TaskCounter(10, n_ranks=2, time_limit=None)
     small.timed(100, 0.01)
-    assert small.take() == (0, 2)  # never more than a share of what is left: 10 // (2 x 2)
-    assert [small.take() for _ in range(5)] == [(2, 2), (4, 1), (5, 1), (6, 1), (7, 1)]
+    assert small.take() == (0, 2, None)  # never more than a share of what is left: 10 // (2 x 2)
+    assert [small.take()[:2] for _ in range(5)] == [(2, 2), (4, 1), (5, 1), (6, 1), (7, 1)]
 
 
 @pytest.mark.mpi

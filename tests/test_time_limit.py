@@ -59,3 +59,12 @@ def test_a_run_out_of_time_stops_on_every_rank_and_the_same_command_finishes_it(
     fresh = run_serial("run", str(job), "--output", str(tmp_path / "fresh"), "--quiet")
     assert fresh.returncode == 0, fresh.stderr
     xr.testing.assert_identical(reproducible_part(out / "limited.nc"), reproducible_part(tmp_path / "fresh" / "limited.nc"))
+
+
+@pytest.mark.mpi
+def test_a_chunk_of_short_tasks_stops_in_time_when_the_tasks_turn_long():
+    result = run_mpi(["tests/scripts/time_limit_probe.py", "2.0", "0.3"])
+    assert result.returncode == 0, result.stderr
+    ended, finished = result.stdout.split()
+    assert float(ended) < 2.0 - 0.3 + 0.15, ended  # the reserve kept, give or take a long task and the polling
+    assert 400 < int(finished) < 600

@@ -15,7 +15,7 @@ import numpy as np
 import xarray as xr
 
 from parsim.errors import JobError
-from parsim.output.dataset import build_dataset, task_rows, write_dataset
+from parsim.output.dataset import build_dataset, write_dataset
 from parsim.output.folder import open_output
 from parsim.solver import flag_attributes
 from parsim.solvers import SOLVERS
@@ -27,8 +27,7 @@ COMPLETED_MEANINGS = ("unfinished", "finished")
 def collect_output(root: Path, out: Path | None = None) -> tuple[Path, int, int]:
     """Write the partial dataset of the output folder ``root``; returns (path, finished tasks, tasks)."""
     folder, job = open_output(Path(root))
-    rows = folder.finished_rows(job)
-    finished = task_rows(job, rows) >= 0
+    rows, finished = folder.finished(job)
     if not finished.any():
         raise JobError(f"output folder {root}: no task of job '{job.name}' has finished yet; nothing to collect")
     dataset = build_dataset(job, SOLVERS[job.kind], rows, mpi_size=1, ranks_per_task=1, partial=True)

@@ -348,12 +348,12 @@ FORMATS: dict[str, Format] = {
 
 def _job_folder(output: Path) -> tuple[str, list[Path]]:
     """The job name and task files of the output folder ``output``; any other folder is an error."""
-    from parsim.output.folder import JOB_COPY, TASKS
+    from parsim.output.folder import JOB_COPY, TASKS, task_files
 
     if not (output / JOB_COPY).is_file():
         raise JobError(f"{output} is not a parsim output folder (no {JOB_COPY} in it); "
                        "give the folder a job wrote, its key 'output' or the --output of parsim run")
-    files = sorted((output / TASKS).glob("*.h5"))
+    files = task_files(output)
     if not files:
         raise JobError(f"{output / TASKS} holds no task file yet: a task's file is written when it finishes, if "
                        f"the job keeps its configuration (key configurations; parsim info {output} says how far "
@@ -363,7 +363,8 @@ def _job_folder(output: Path) -> tuple[str, list[Path]]:
 
 def export_output(output: Path, format: str, task: str | None = None, all_tasks: bool = False,
                   out: Path | None = None) -> list[Path]:
-    """Export the task ``task`` (default: the first) or every task of ``output`` as ``format``; the files written.
+    """Export the task ``task`` (default: the job's first task that has a task file) or every task of the
+    job in ``output`` as ``format``; the files written.
 
     ``out`` is, for one task, the file to write or an existing folder to write LABEL + the
     format's suffix in; for every task, the folder (both default to OUTPUT/export).  A
@@ -410,7 +411,8 @@ def add_export_command(subparsers) -> None:
     export = subparsers.add_parser("export", help="write task files for OVITO, ParaView, LAMMPS, YADE, ASE")
     export.add_argument("output", type=Path, help="output folder of a job")
     which = export.add_mutually_exclusive_group()
-    which.add_argument("--task", metavar="LABEL", help="the task to export, its file name in OUTPUT/tasks without .h5 (default: the first)")
+    which.add_argument("--task", metavar="LABEL", help="the task to export, its file name in OUTPUT/tasks "
+                       "without .h5 (default: the job's first task that has one)")
     which.add_argument("--all", action="store_true", help="export every task (vtk: with a .pvd collection)")
     export.add_argument("--format", required=True, metavar="FORMAT",
                         help="; ".join(f"{name} ({spec.readers})" for name, spec in FORMATS.items()))

@@ -31,7 +31,7 @@ import numpy as np
 from parsim.errors import JobError, OutputError
 from parsim.job import UNIT_KEYS, Job, Task, parse_job
 from parsim.output.atomic import TEMPORARY_SUFFIX, written_atomically
-from parsim.output.dataset import row_layout
+from parsim.output.dataset import row_layout, task_rows
 from parsim.output.rows import ROWS, read_header, read_rows, row_files
 from parsim.output.snapshot import check_schema, read_schema_attributes
 
@@ -52,10 +52,11 @@ class OutputFolder:
     def task_path(self, task: Task) -> Path:
         return self.tasks / f"{task.label}.h5"
 
-    def finished_rows(self, job: Job) -> np.ndarray:
+    def finished(self, job: Job) -> tuple[np.ndarray, np.ndarray]:
         """The rows of every finished task in the folder (:func:`parsim.output.rows.read_rows`), of this
-        job's or not."""
-        return read_rows(self.rows, row_layout(job, job.solver))
+        job's or not, and for each task of ``job.tasks()`` whether it has finished."""
+        rows = read_rows(self.rows, row_layout(job, job.solver))
+        return rows, task_rows(job, rows) >= 0
 
     def create(self) -> None:
         """Make the folder, its ``tasks`` and ``rows`` folders; a failure is an :class:`OutputError` naming the path."""
@@ -117,11 +118,11 @@ class OutputFolder:
                 if now != then:
                     raise JobError(
                         f"output folder {self.root} holds results computed from a different {key} {path!r} "
-                        f"(its content changed since the first run: sha256 {then[:12]}... then, {now[:12]}... now); "
+                        f"(its content changed since an earlier run: sha256 {then[:12]}... then, {now[:12]}... now); "
                         "give another output folder or restore the file")
 
     def _recorded_inputs(self) -> dict[str, dict[str, str]]:
-        """The input hashes of the first run; none for a folder that records none."""
+        """The input hashes recorded by earlier runs; none for a folder that records none."""
         if not self.inputs.exists():
             return {}
         try:
@@ -144,6 +145,13 @@ def open_output(root: Path) -> tuple[OutputFolder, Job]:
     return folder, job
 
 
+def task_files(root: Path) -> list[Path]:
+    """The task files of the job of the output folder ``root``, in the job's order: those of tasks
+    the job no longer has (a shrunk job) and those of tasks that keep none are left out."""
+    folder, job = open_output(Path(root))
+    return [path for path in map(folder.task_path, job.tasks()) if path.exists()]
+
+
 _UNSET = object()
 
 
@@ -153,7 +161,7 @@ def _identity(job: Job) -> dict[str, Any]:
     return {"name": job.name, "kind": job.kind, "seed": job.seed,
             **{unit.key: job.units[unit.quantity] for unit in UNIT_KEYS},
             **{f"[parameters] {key}": value for key, value in job.fixed.items()},
-            **{f"[[{key}]]": list(entries) for key, entries in job.tables.items()}}
+            **{f"[[{key}]]": job.table_entries(key) for key in job.tables}}
 
 
 def _differences(then: Job, now: Job) -> list[str]:

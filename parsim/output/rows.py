@@ -30,12 +30,13 @@ import numpy as np
 from parsim.errors import JobError, OutputError
 from parsim.job import KEY_BYTES, Task
 from parsim.output.atomic import write_bytes_atomically
-from parsim.output.snapshot import check_schema, provenance_attributes
+from parsim.output.snapshot import SCHEMA_ATTRIBUTE, check_schema, provenance_attributes
 
 ROWS = "rows"
 SUFFIX = ".rows"
 FORMAT = "parsim task rows"
 MAX_HEADER_BYTES = 1 << 20
+READ_ATTEMPTS = 3
 
 
 @dataclass(frozen=True)
@@ -125,10 +126,17 @@ def read_rows(folder: Path, layout: RowLayout, files: list[Path] | None = None) 
 
     A cut-off last record and records whose CRC does not match are left out; a task found
     twice keeps its first record.  A file of another layout or output schema is a
-    :class:`JobError` naming it.
+    :class:`JobError` naming it.  A file that vanishes while it is read (a run that starts
+    merges the files: :func:`merge_rows`) sends the reading back to the folder's files.
     """
-    files = row_files(folder) if files is None else files
-    parts = [_read_file(path, layout) for path in files]
+    for attempt in range(READ_ATTEMPTS):
+        listed = row_files(folder) if files is None else files
+        try:
+            parts = [_read_file(path, layout) for path in listed]
+            break
+        except FileNotFoundError as error:
+            if files is not None or attempt == READ_ATTEMPTS - 1:
+                raise OutputError.from_os_error(error, error.filename, doing="read") from None
     rows = np.concatenate(parts) if parts else np.zeros(0, dtype=layout.dtype)
     identity = np.zeros(len(rows), dtype=[("key", f"V{KEY_BYTES}"), ("realization", "<u4")])
     identity["key"], identity["realization"] = rows["key"], rows["realization"]
@@ -148,8 +156,8 @@ def merge_rows(folder: Path, layout: RowLayout, job_name: str) -> np.ndarray:
     """
     files = row_files(folder)
     rows = read_rows(folder, layout, files)
-    if len(files) > 1 or (files and files[0].stat().st_size != len(layout.header(job_name)) +
-                          len(rows) * layout.dtype.itemsize):
+    complete = len(layout.header(job_name)) + len(rows) * layout.dtype.itemsize
+    if len(files) > 1 or (files and _size(files[0]) != complete):
         merged = folder / f"merged-{secrets.token_hex(4)}{SUFFIX}"
         write_bytes_atomically(merged, layout.header(job_name) + rows.tobytes())
         for path in files:
@@ -163,6 +171,8 @@ def read_header(path: Path) -> dict | None:
     try:
         with open(path, "rb") as file:
             line = file.readline(MAX_HEADER_BYTES)
+    except FileNotFoundError:
+        raise
     except OSError as error:
         raise OutputError.from_os_error(error, path, doing="read") from None
     if not line.endswith(b"\n") and len(line) < MAX_HEADER_BYTES:
@@ -171,10 +181,22 @@ def read_header(path: Path) -> dict | None:
         header = json.loads(line)
         if header.get("format") != FORMAT:
             raise ValueError
-    except (ValueError, AttributeError):
-        raise JobError(f"{path} is not a parsim row file; remove it from {path.parent}") from None
+        int(header[SCHEMA_ATTRIBUTE])
+        header["fields"] = [(str(name), str(kind), tuple(int(n) for n in shape))
+                            for name, kind, shape in header["fields"]]
+    except (ValueError, AttributeError, KeyError, TypeError):
+        raise JobError(f"{path} is not a row file of parsim; remove it from {path.parent}") from None
     header["header_bytes"] = len(line)
     return header
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except FileNotFoundError:
+        raise
+    except OSError as error:
+        raise OutputError.from_os_error(error, path, doing="read") from None
 
 
 def _read_file(path: Path, layout: RowLayout) -> np.ndarray:
@@ -182,10 +204,10 @@ def _read_file(path: Path, layout: RowLayout) -> np.ndarray:
     if header is None:
         return np.zeros(0, dtype=layout.dtype)
     check_schema(header, f"row file {path}", path.parent.parent)
-    if [(name, kind, tuple(shape)) for name, kind, shape in header["fields"]] != list(layout.fields):
+    if header["fields"] != list(layout.fields):
         raise JobError(f"row file {path} holds statistics laid out otherwise than this job's (another solver "
                        f"version or observable sizes); give another output folder or remove {path.parent.parent}")
-    size = path.stat().st_size - header["header_bytes"]
+    size = _size(path) - header["header_bytes"]
     rows = np.fromfile(path, dtype=layout.dtype, count=size // layout.dtype.itemsize, offset=header["header_bytes"])
     raw = rows.view(np.uint8).reshape(len(rows), layout.dtype.itemsize)
     intact = np.array([zlib.crc32(record[:-4]) for record in raw], dtype=np.uint32) == rows["crc"]

@@ -4,7 +4,7 @@ Tasks ``0 .. n_tasks-1`` are handed out in index order (the caller orders them
 by decreasing cost), to whichever rank asks first.  No rank is a pure master:
 rank 0 computes tasks in its main thread while a small server thread answers
 the other ranks' requests.  The solvers' numba kernels release the GIL, so the
-server answers within about a millisecond even while rank 0 computes.  This
+server answers within a few milliseconds even while rank 0 computes.  This
 keeps every core busy when task costs differ 100-fold, which a static split
 cannot.  Tasks go out one at a time while they are long; once the tasks
 finished so far show that they take less than :data:`CHUNK_SECONDS`, a request
@@ -23,8 +23,8 @@ ranks failing together print one message: see
 :class:`~parsim.parallel.collective.FailureReport`); no rank waits forever
 (with groups, the abort is on the whole communicator, whichever rank of a
 group failed).
-Files of tasks already finished are complete on disk (they are written under a
-temporary name and renamed), so nothing finished is lost.  On a single rank the
+What the finished tasks wrote is complete on disk (the caller writes each task's
+outputs whole), so nothing finished is lost.  On a single rank the
 exception is raised as :class:`TaskFailed` instead.
 """
 
@@ -57,7 +57,9 @@ class TimeLimit:
     A task may start when now + the longest task so far + ``reserve`` <= the deadline, ``seconds``
     after this object was made (the run's start); once refused, every later task is (the clock and
     the longest task only grow).  A task's duration runs from its start to the report of its end;
-    a chunk of short tasks (:data:`CHUNK_SECONDS`) counts as one task, named by its first index.
+    a chunk of short tasks (:data:`CHUNK_SECONDS`) counts as one task, named by its first index,
+    and starts each of its tasks only while one as long as its longest so far ends within
+    :meth:`budget`, so that tasks slower than those before them cannot carry a chunk past the limit.
     Thread-safe: rank 0's two threads share it.
     """
 
@@ -81,6 +83,10 @@ class TimeLimit:
         with self._lock:
             self.longest = max(self.longest, self._clock() - self._started.pop(k))
 
+    def budget(self) -> float:
+        """Seconds from now within which a task must end: to the deadline, less the reserve."""
+        return self.deadline - self.reserve - self._clock()
+
 
 class _TaskCounter:
     """The next chunk of tasks, shared by rank 0's two threads; none once the time limit refuses one."""
@@ -94,8 +100,8 @@ class _TaskCounter:
         self._seconds = 0.0
         self._lock = threading.Lock()
 
-    def take(self) -> tuple[int, int] | None:
-        """(first task, number of tasks) of the next chunk, or None."""
+    def take(self) -> tuple[int, int, float | None] | None:
+        """(first task, number of tasks, seconds within which they must end or None) of the next chunk, or None."""
         with self._lock:
             remaining = self._n_tasks - self._next
             if remaining <= 0 or (self._time_limit and not self._time_limit.may_start(self._next)):
@@ -103,7 +109,7 @@ class _TaskCounter:
                 return None
             first, count = self._next, self._chunk(remaining)
             self._next += count
-            return first, count
+            return first, count, self._time_limit.budget() if self._time_limit else None
 
     def timed(self, count: int, seconds: float) -> None:
         """Record that ``count`` tasks took ``seconds`` to compute."""
@@ -159,17 +165,25 @@ def run_tasks(
     report = FailureReport(sched)
     counter = _TaskCounter(n_tasks, sched.Get_size(), time_limit)
 
-    def run_chunk(first: int, count: int) -> tuple[int, int, float]:
+    def run_chunk(first: int, count: int, budget: float | None) -> tuple[int, int, float]:
+        """Run the chunk's tasks in order; with a ``budget``, start one only while a task as long as the
+        chunk's longest so far would end within it (the others are left undone).  Returns (first, tasks
+        done, seconds)."""
         start = time.perf_counter()
+        longest = 0.0
         for k in range(first, first + count):
+            began = time.perf_counter()
+            if budget is not None and k > first and began - start + longest > budget:
+                return first, k - first, began - start
             try:
                 work(k)
             except Exception as error:  # noqa: BLE001 - every failure must end the job with its message
                 report.fail(f"{describe_failure(k, error)} (on rank {comm.Get_rank()})")
+            longest = max(longest, time.perf_counter() - began)
         return first, count, time.perf_counter() - start
 
     def finished(chunk: tuple[int, int, float], rank: int) -> None:
-        """Rank 0, either thread: the chunk's tasks have finished on ``rank``."""
+        """Rank 0, either thread: the first ``count`` tasks of the chunk have finished on ``rank``."""
         first, count, seconds = chunk
         counter.timed(count, seconds)
         if time_limit is not None:

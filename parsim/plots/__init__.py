@@ -15,7 +15,7 @@ import xarray as xr
 
 from parsim.errors import PlotError
 from parsim.output.dataset import check_dataset_schema
-from parsim.output.folder import JOB_COPY, TASKS, OutputFolder
+from parsim.output.folder import JOB_COPY, TASKS, OutputFolder, task_files
 from parsim.plots import aggregation, deposition
 from parsim.plots.common import FigureSpec, save
 
@@ -31,7 +31,7 @@ def plot_output(output: Path, figure: str | None = None, out: Path | None = None
 
     ``out``: with ``figure``, the file to write (see :func:`parsim.plots.common.image_paths`),
     by default OUTPUT/figures/NAME; without, the folder for every figure, by default
-    OUTPUT/figures.  ``task`` is the label of the task pictured (default: the first).
+    OUTPUT/figures.  ``task`` is the label of the task pictured (default: the job's first task that has a task file).
     Figures whose needs the outputs lack are skipped with one reported line each, unless
     ``figure`` asks for one: then :class:`PlotError` says what is missing.  Returns the files written.
     """
@@ -97,8 +97,8 @@ def _open(path: Path) -> xr.Dataset:
 
 
 def _task_file(tasks: Path, label: str | None) -> Path:
-    """The task file pictured: ``label``'s, or the first one."""
-    files = sorted(tasks.glob("*.h5"))
+    """The task file pictured: ``label``'s, or that of the job's first task that keeps one."""
+    files = task_files(tasks.parent) if (tasks.parent / JOB_COPY).is_file() else []
     if not files:
         raise PlotError(f"the pictures need task files, and {tasks} holds none (a job with configurations = "
                         "\"none\" keeps none)")
