@@ -37,7 +37,7 @@ from parsim.output.dataset import build_dataset, row_layout, task_rows, write_da
 from parsim.output.folder import OutputFolder
 from parsim.output.location import check_output_location
 from parsim.output.lock import FolderLock
-from parsim.output.rows import RowWriter, merge_rows
+from parsim.output.rows import RowWriter
 from parsim.output.snapshot import write_task_file
 from parsim.parallel.collective import on_root, wait_for
 from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
@@ -103,8 +103,7 @@ def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
     folder.create()
     lock.acquire()
     try:
-        folder.prepare(job, _stored_job(folder))
-        found = task_rows(job, merge_rows(folder.rows, row_layout(job, job.solver), job.name))
+        found = task_rows(job, folder.prepare(job, _stored_job(folder)))
         return [task for task, row in zip(job.tasks(), found) if row < 0]
     except BaseException:
         lock.release()

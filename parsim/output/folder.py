@@ -32,7 +32,7 @@ from parsim.errors import JobError, OutputError
 from parsim.job import UNIT_KEYS, Job, Task, parse_job
 from parsim.output.atomic import TEMPORARY_SUFFIX, written_atomically
 from parsim.output.dataset import row_layout, task_rows
-from parsim.output.rows import ROWS, read_header, read_rows, row_files
+from parsim.output.rows import ROWS, merge_rows, read_header, read_rows, row_files
 from parsim.output.snapshot import check_schema, read_schema_attributes
 
 JOB_COPY = "job.toml"
@@ -66,12 +66,14 @@ class OutputFolder:
             except OSError as error:
                 raise OutputError.from_os_error(error, folder, doing="create") from None
 
-    def prepare(self, job: Job, stored_job: Job | None) -> None:
-        """Create the folder for ``job``, or check that ``job`` may run where ``stored_job`` ran; remove
-        stale temporaries.
+    def prepare(self, job: Job, stored_job: Job | None) -> np.ndarray:
+        """Create the folder for ``job``, or check that ``job`` may run where ``stored_job`` ran; merge the
+        row files (:func:`~parsim.output.rows.merge_rows`; call it holding the folder's lock); remove stale
+        temporaries.  Returns the rows of the finished tasks, of this job's or not.
 
-        ``stored_job`` is the job read from :attr:`job_copy` (None if absent).  ``job`` becomes
-        the folder's copy; the hashes of its input files join those recorded in :attr:`inputs`.
+        ``stored_job`` is the job read from :attr:`job_copy` (None if absent).  Once every check
+        has passed, rows included, ``job`` becomes the folder's copy and the hashes of its input
+        files join those recorded in :attr:`inputs`.
         """
         recorded = {}
         if stored_job is not None:
@@ -85,6 +87,7 @@ class OutputFolder:
             recorded = self._recorded_inputs()
             self._check_inputs(job, recorded)
         self.create()
+        rows = merge_rows(self.rows, row_layout(job, job.solver), job.name)
         inputs = {key: {**recorded.get(key, {}), **job.input_hashes.get(key, {})}
                   for key in {**recorded, **job.input_hashes}}
         if stored_job is None or inputs != recorded:
@@ -95,6 +98,7 @@ class OutputFolder:
                 temporary.write_text(job.text)
         for leftover in self.root.rglob(f"*{TEMPORARY_SUFFIX}"):
             leftover.unlink(missing_ok=True)
+        return rows
 
     def check_schema(self) -> None:
         """Refuse a folder whose files record another output schema than this parsim's.

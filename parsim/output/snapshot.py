@@ -26,7 +26,8 @@ OUTPUT_SCHEMA = 4
 """Version of the layout of the outputs (task files and dataset), recorded in both.
 
 Raise it with any change that would make parsim misread the outputs of an earlier
-version, e.g. a statistic added or a coordinate coded differently.  Schema 2 (parsim
+version, e.g. a statistic added, a coordinate coded differently, or a parameter's default
+changed (a point's key and stream leave parameters at their default out).  Schema 2 (parsim
 0.2.0): UDUNITS units, a numeric ``component``, the schema and version recorded.  Schema 3
 (parsim 0.3.0): the deposition's species, structure and substrate outputs.  Schema 4 (parsim 0.4.0):
 random streams and task files named by the values of a task's point, statistics in row files.
