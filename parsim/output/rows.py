@@ -105,12 +105,16 @@ class RowWriter:
             self._descriptor = None
 
     def _open(self) -> None:
-        self.path = self.folder / f"rank{self.rank:05d}-{secrets.token_hex(4)}{SUFFIX}"
-        try:
-            self.folder.mkdir(exist_ok=True)
-            self._descriptor = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
-        except OSError as error:
-            raise OutputError.from_os_error(error, self.path, doing="create") from None
+        """Create a file of a name no earlier run used (a random suffix, drawn again if taken)."""
+        while self._descriptor is None:
+            self.path = self.folder / f"rank{self.rank:05d}-{secrets.token_hex(4)}{SUFFIX}"
+            try:
+                self.folder.mkdir(exist_ok=True)
+                self._descriptor = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
+            except FileExistsError:
+                continue
+            except OSError as error:
+                raise OutputError.from_os_error(error, self.path, doing="create") from None
 
     def _write(self, data: bytes) -> None:
         try:
