@@ -156,6 +156,7 @@ def _run(args) -> int:
 
 def _validate(args) -> int:
     from parsim.job import load_job
+    from parsim.output.folder import OutputFolder
     from parsim.output.location import check_output_location
     from parsim.solvers import SOLVERS
 
@@ -163,6 +164,12 @@ def _validate(args) -> int:
     check_output_location(job.output)
     print(f"{args.job}: valid {job.kind} job '{job.name}': {job.n_points} parameter points x "
           f"{job.realizations} realizations = {len(job.tasks())} tasks, output in {job.output}")
+    folder = OutputFolder(job.output, job.name)
+    stored = folder.stored_job()
+    if stored is not None:  # a rerun: resumed or grown
+        folder.check(job, stored)
+        done = int(folder.finished(job)[1].sum())
+        print(f"{job.output} holds {done} of these tasks finished: {len(job.tasks()) - done} to compute")
     return 0
 
 

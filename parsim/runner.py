@@ -31,7 +31,7 @@ from mpi4py import MPI
 
 from parsim.errors import JobError, describe_exception
 from parsim.interrupts import ending_on_signals
-from parsim.job import Job, Task, parse_job
+from parsim.job import Job, Task
 from parsim.output.collect import collect_output
 from parsim.output.dataset import build_dataset, row_layout, task_rows, write_dataset
 from parsim.output.folder import OutputFolder
@@ -103,7 +103,7 @@ def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
     folder.create()
     lock.acquire()
     try:
-        found = task_rows(job, folder.prepare(job, _stored_job(folder)))
+        found = task_rows(job, folder.prepare(job, folder.stored_job()))
         return [task for task, row in zip(job.tasks(), found) if row < 0]
     except BaseException:
         lock.release()
@@ -251,12 +251,3 @@ def _check_ranks_per_task(ranks_per_task: int, n_ranks: int) -> None:
         raise JobError(f"--ranks-per-task {ranks_per_task}: allowed: a divisor of the number of MPI ranks "
                        f"({n_ranks}): {divisors}")
 
-
-def _stored_job(folder: OutputFolder) -> Job | None:
-    if not folder.job_copy.exists():
-        return None
-    try:
-        return parse_job(folder.job_copy.read_text(), SOLVERS, source=str(folder.job_copy), verify=False)
-    except JobError as error:
-        raise JobError(f"output folder {folder.root} holds a job file that is no longer valid ({error}); "
-                       f"give another output folder or remove {folder.root}") from None

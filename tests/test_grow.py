@@ -76,6 +76,18 @@ def test_a_job_grown_in_two_steps_equals_the_grown_job_run_at_once(tmp_path):
                            "component": 2, "r": 8}
 
 
+def test_validate_says_how_many_tasks_a_grown_job_computes_and_refuses_a_changed_one(tmp_path):
+    run_into(tmp_path, "first", FIRST, "out")
+    (tmp_path / "grown.toml").write_text(GROWN)
+    checked = run_serial("validate", str(tmp_path / "grown.toml"), "--output", str(tmp_path / "out"))
+    assert checked.returncode == 0, checked.stderr
+    assert f"{tmp_path / 'out'} holds 4 of these tasks finished: 14 to compute" in checked.stdout
+    (tmp_path / "changed.toml").write_text(GROWN.replace("seed = 11", "seed = 12"))
+    refused = run_serial("validate", str(tmp_path / "changed.toml"), "--output", str(tmp_path / "out"))
+    assert refused.returncode == 2 and "which differs in: seed (11 then, 12 now)" in refused.stderr
+    assert (tmp_path / "out" / "job.toml").read_text() == FIRST  # validate writes nothing
+
+
 def test_a_point_draws_the_same_numbers_whatever_the_sweep_holds_and_its_order(tmp_path):
     grown = run_into(tmp_path, "grown", GROWN, "grown")
     reordered = GROWN.replace("volume_fraction = [0.15, 0.2, 0.1]\nn_spheres = [40, 60]",

@@ -75,17 +75,7 @@ class OutputFolder:
         has passed, rows included, ``job`` becomes the folder's copy and the hashes of its input
         files join those recorded in :attr:`inputs`.
         """
-        recorded = {}
-        if stored_job is not None:
-            self.check_schema()
-            different = _differences(stored_job, job)
-            if different:
-                raise JobError(
-                    f"output folder {self.root} holds results of a different job, which differs in: "
-                    f"{', '.join(different)}; a job may only add or remove [sweep] values and realizations: "
-                    f"give another output folder (key 'output' or option --output) or remove {self.root}")
-            recorded = self._recorded_inputs()
-            self._check_inputs(job, recorded)
+        recorded = self.check(job, stored_job)
         self.create()
         rows = merge_rows(self.rows, row_layout(job, job.solver), job.name)
         inputs = {key: {**recorded.get(key, {}), **job.input_hashes.get(key, {})}
@@ -99,6 +89,35 @@ class OutputFolder:
         for leftover in self.root.rglob(f"*{TEMPORARY_SUFFIX}"):
             leftover.unlink(missing_ok=True)
         return rows
+
+    def check(self, job: Job, stored_job: Job | None) -> dict[str, dict[str, str]]:
+        """Refuse to run ``job`` where ``stored_job`` ran (:meth:`prepare`'s checks, writing nothing);
+        returns the input hashes recorded by earlier runs."""
+        if stored_job is None:
+            return {}
+        self.check_schema()
+        different = _differences(stored_job, job)
+        if different:
+            raise JobError(
+                f"output folder {self.root} holds results of a different job, which differs in: "
+                f"{', '.join(different)}; a job may only add or remove [sweep] values and realizations: "
+                f"give another output folder (key 'output' or option --output) or remove {self.root}")
+        recorded = self._recorded_inputs()
+        self._check_inputs(job, recorded)
+        return recorded
+
+    def stored_job(self) -> Job | None:
+        """The job of the folder's copy (None if there is none), read without its input files, which
+        may be gone (:attr:`inputs` keeps their hashes)."""
+        from parsim.solvers import SOLVERS  # here: the solvers import numba, which a folder alone does not need
+
+        if not self.job_copy.exists():
+            return None
+        try:
+            return parse_job(self.job_copy.read_text(), SOLVERS, source=str(self.job_copy), verify=False)
+        except JobError as error:
+            raise JobError(f"output folder {self.root} holds a job file that is no longer valid ({error}); "
+                           f"give another output folder or remove {self.root}") from None
 
     def check_schema(self) -> None:
         """Refuse a folder whose files record another output schema than this parsim's.
