@@ -43,7 +43,6 @@ from parsim.parallel.collective import on_root, wait_for
 from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
 from parsim.progress import TaskProgress
 from parsim.solver import TaskResult
-from parsim.solvers import SOLVERS
 
 
 #: A time-limited run stops handing out tasks this long before its limit (plus the next), at least.
@@ -113,7 +112,7 @@ def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
 def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: threading.Lock, comm: MPI.Comm,
                  progress: bool, ranks_per_task: int, time_limit: TimeLimit | None) -> tuple[int, float]:
     """Run the ``pending`` tasks; on rank 0, how many finished and in how many seconds (after the warm-up)."""
-    solver = SOLVERS[job.kind]
+    solver = job.solver
     warm_up(job, pending, progress)
     point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
     # Costliest first, so that the last tasks to start are short and no rank idles at the end; every
@@ -163,7 +162,7 @@ def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult | None:
 
     A decomposed task's result lives on ``comm``'s rank 0; the other ranks get None.
     """
-    solver = SOLVERS[job.kind]
+    solver = job.solver
     start = time.perf_counter()
     result = solver.solve(job.point_parameters(task.point), np.random.default_rng(job.seed_sequence(task)), comm)
     if comm.Get_rank() > 0:
@@ -187,7 +186,7 @@ def warm_up(job: Job, pending: list[Task], announce: bool) -> None:
     measures the computation alone.  Kernels that only a decomposed task calls
     (``--ranks-per-task``) still compile in the first such task.
     """
-    solver = SOLVERS[job.kind]
+    solver = job.solver
     rehearsals = {}
     for task in pending:
         small = solver.warm_up_parameters(job.point_parameters(task.point))
@@ -208,7 +207,7 @@ def _write_outputs(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task
     """Rank 0: the dataset if every task has finished, else the partial dataset of those that have."""
     rows, found = folder.finished(job)
     if found.all():
-        write_dataset(build_dataset(job, SOLVERS[job.kind], rows, mpi_size, ranks_per_task), folder.dataset)
+        write_dataset(build_dataset(job, job.solver, rows, mpi_size, ranks_per_task), folder.dataset)
         return folder.dataset, True
     if not found.any():
         return None, False

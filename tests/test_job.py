@@ -422,3 +422,8 @@ def test_two_files_of_one_content_are_one_point_and_refused(tmp_path):
             f"sweep points agglomerate_file='{first}' and agglomerate_file='{second}' are one point: their input "
             "files have the same content; give each file once")):
         parse(DEPOSITION + f'shape = "agglomerate"\n[sweep]\nagglomerate_file = ["{first}", "{second}"]\n')
+
+
+def test_a_species_whose_shape_lacks_its_file_is_named():
+    with pytest.raises(JobError, match=re.escape("[[species]] name = 'large': shape = 'mesh' needs mesh_file")):
+        parse(SPECIES.replace('name = "large"', 'name = "large"\nshape = "mesh"'))

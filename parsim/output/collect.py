@@ -18,7 +18,6 @@ from parsim.errors import JobError
 from parsim.output.dataset import build_dataset, write_dataset
 from parsim.output.folder import open_output
 from parsim.solver import flag_attributes
-from parsim.solvers import SOLVERS
 
 PARTIAL_SUFFIX = ".partial.nc"
 COMPLETED_MEANINGS = ("unfinished", "finished")
@@ -30,7 +29,7 @@ def collect_output(root: Path, out: Path | None = None) -> tuple[Path, int, int]
     rows, finished = folder.finished(job)
     if not finished.any():
         raise JobError(f"output folder {root}: no task of job '{job.name}' has finished yet; nothing to collect")
-    dataset = build_dataset(job, SOLVERS[job.kind], rows, mpi_size=1, ranks_per_task=1, partial=True)
+    dataset = build_dataset(job, job.solver, rows, mpi_size=1, ranks_per_task=1, partial=True)
     dataset["completed"] = xr.Variable(
         (*job.sweep, "realization"), finished.astype(np.int8).reshape(*job.sweep_shape, job.realizations),
         {"long_name": "whether the task had finished when the dataset was collected", "units": "1",

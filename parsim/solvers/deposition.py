@@ -31,8 +31,9 @@ from parsim.solvers.deposition_materials import (
     Species,
     check_species,
     draw_particles,
-    particle_shape,
     species_of,
+    species_parameters,
+    species_shape,
 )
 
 SHAPES = ("sphere", "rod", "four_rods", "tripod", "spiky", "cube", "ellipsoid", "superellipsoid", "agglomerate",
@@ -321,13 +322,13 @@ def _shapes(params: dict) -> set[str]:
 
 def _spheres_per_particle(params: dict) -> int:
     """Spheres of the largest particle of the mixture, counted without building it where possible."""
-    return max(_spheres_of({**params, **entry}) for entry in params.get("species") or ({},))
+    return max(_spheres_of(species_parameters(params, entry), entry) for entry in params.get("species") or ({},))
 
 
-def _spheres_of(params: dict) -> int:
+def _spheres_of(params: dict, entry: dict) -> int:
     shape, size = params["shape"], params["shape_size"]
     if shape in ("agglomerate", "mesh"):
-        return len(particle_shape(params)[1])
+        return len(species_shape(params, entry)[1])
     if shape in SMOOTH_SHAPES:
         return params["shape_spheres"]  # at most: medial balls that add nothing are dropped
     return {"sphere": 1, "rod": size, "four_rods": 4 * size - 3, "tripod": 3 * size - 2, "spiky": 3 * size - 2,

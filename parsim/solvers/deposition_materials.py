@@ -109,11 +109,24 @@ def species_of(params: dict) -> tuple[Species, ...]:
     entries = params.get("species") or ({},)
     found = []
     for i, entry in enumerate(entries):
-        own = {**params, **{key: value for key, value in entry.items() if key in SPECIES_KEYS}}
-        default_name = own["shape"] if len(entries) == 1 else f"species_{i}"
-        offsets, radii, volume = particle_shape(own)
-        found.append(Species(entry.get("name", default_name), own, entry.get("share", 1.0), offsets, radii, volume))
+        own = species_parameters(params, entry)
+        offsets, radii, volume = species_shape(own, entry)
+        name = entry.get("name", own["shape"] if len(entries) == 1 else f"species_{i}")
+        found.append(Species(name, own, entry.get("share", 1.0), offsets, radii, volume))
     return tuple(found)
+
+
+def species_parameters(params: dict, entry: dict) -> dict:
+    """The parameters of the species of a ``[[species]]`` entry: its own keys, the job's for the rest."""
+    return {**params, **{key: value for key, value in entry.items() if key in SPECIES_KEYS}}
+
+
+def species_shape(own: dict, entry: dict) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`particle_shape` of a species' parameters ``own``; an error names the ``[[species]]`` entry."""
+    try:
+        return particle_shape(own)
+    except JobError as error:
+        raise (JobError(f"[[species]] name = {entry['name']!r}: {error}") if entry else error) from None
 
 
 def check_species(params: dict) -> None:

@@ -22,6 +22,7 @@ from parsim.core import structure
 from parsim.core.sediment import filling_height, packing_fractions
 from parsim.parameters import Parameter
 from parsim.solver import LENGTH_UNITS, Coordinate, Statistic, coded_coordinate
+from parsim.solvers.deposition_materials import mesh_approximation
 
 BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the filling height, away from floor and surface
 PROFILE_TOP = 1.25  # the profile phi(z) covers 0 <= z <= PROFILE_TOP x filling height
@@ -215,8 +216,6 @@ def _mixture(result, species, drops, volume, height) -> dict:
 def _mesh_error(s) -> tuple[float, float]:
     if s.params["shape"] != "mesh":
         return np.nan, np.nan
-    from parsim.solvers.deposition_materials import mesh_approximation
-
     error = mesh_approximation(s.params)
     return float(error.volume_error), float(error.relative_surface_distance)
 
