@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from parsim.solvers import SOLVERS
-from parsim.solvers import deposition
+from parsim.solvers import deposition, deposition_materials
 
 SOLVER = SOLVERS["deposition"]
 SIZES = (10_000, 100_000, 1_000_000)
@@ -44,7 +44,7 @@ def task_parameters(shape_params, phi_guess, spheres):
     """The parameters of a deposition task of about ``spheres`` spheres, as ``parsim run`` builds them."""
     params = {p.name: p.default for p in SOLVER.parameters}
     params.update(shape_params, lateral="periodic", floor="stop")
-    _, radii, volume = deposition.particle_shape(params)
+    _, radii, volume = deposition_materials.particle_shape(params)
     n_particles = max(2, round(spheres / len(radii)))
     # h = n V / (phi L^2) <= L  <=>  L >= (n V / phi)^(1/3)
     box = math.ceil((n_particles * volume / phi_guess) ** (1.0 / 3.0))

@@ -28,7 +28,7 @@ from parsim.agglomerate_file import read_agglomerate
 from parsim.errors import JobError
 from parsim.core.sdbd.rotation import quat_to_matrix
 from parsim.output.export import FORMATS, add_export_command, export_output, run_export
-from parsim.solvers.deposition import particle_shape
+from parsim.solvers.deposition_materials import particle_shape
 from tests.datasets import run_serial
 
 def ovito_import_file(path):
