@@ -177,8 +177,16 @@ class Job:
         method (parameters with ``affects_seed=False``) share their initial condition; a point
         draws the same numbers whatever else the sweep holds and in whatever order it is written.
         """
-        words = np.frombuffer(_digest(self._canonical(task.point, seeded_only=True))[:16], dtype="<u4")
-        return np.random.SeedSequence(self.seed, spawn_key=(*(int(word) for word in words), task.realization))
+        words = self._seed_words.get(task.point)
+        if words is None:  # once per point, not per task: a point may have 10⁵ realisations
+            digest = _digest(self._canonical(task.point, seeded_only=True))
+            words = self._seed_words[task.point] = tuple(int(word) for word in np.frombuffer(digest[:16], "<u4"))
+        return np.random.SeedSequence(self.seed, spawn_key=(*words, task.realization))
+
+    @functools.cached_property
+    def _seed_words(self) -> dict[int, tuple[int, ...]]:
+        """The four words of each point's stream digest, filled in as :meth:`seed_sequence` meets the points."""
+        return {}
 
     @functools.cached_property
     def _point_keys(self) -> list[bytes]:
