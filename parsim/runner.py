@@ -32,7 +32,7 @@ from mpi4py import MPI
 from parsim.errors import JobError, describe_exception
 from parsim.interrupts import ending_on_signals
 from parsim.job import Job, Task
-from parsim.output.collect import collect_output
+from parsim.output.collect import write_partial_dataset
 from parsim.output.dataset import build_dataset, row_layout, task_rows, write_dataset
 from parsim.output.folder import OutputFolder
 from parsim.output.location import check_output_location
@@ -211,7 +211,7 @@ def _write_outputs(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task
         return folder.dataset, True
     if not found.any():
         return None, False
-    return collect_output(folder.root)[0], False
+    return write_partial_dataset(folder, job, rows, found)[0], False
 
 
 def _end_on_signal(number: signal.Signals, job: Job, folder: OutputFolder, lock: FolderLock,

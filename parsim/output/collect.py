@@ -16,7 +16,8 @@ import xarray as xr
 
 from parsim.errors import JobError
 from parsim.output.dataset import build_dataset, write_dataset
-from parsim.output.folder import open_output
+from parsim.job import Job
+from parsim.output.folder import OutputFolder, open_output
 from parsim.solver import flag_attributes
 
 PARTIAL_SUFFIX = ".partial.nc"
@@ -27,8 +28,15 @@ def collect_output(root: Path, out: Path | None = None) -> tuple[Path, int, int]
     """Write the partial dataset of the output folder ``root``; returns (path, finished tasks, tasks)."""
     folder, job = open_output(Path(root))
     rows, finished = folder.finished(job)
+    return write_partial_dataset(folder, job, rows, finished, out)
+
+
+def write_partial_dataset(folder: OutputFolder, job: Job, rows: np.ndarray, finished: np.ndarray,
+                          out: Path | None = None) -> tuple[Path, int, int]:
+    """Write the partial dataset of ``job`` from the ``rows`` of its folder and the ``finished`` mask of its
+    tasks (:meth:`~parsim.output.folder.OutputFolder.finished`); returns (path, finished tasks, tasks)."""
     if not finished.any():
-        raise JobError(f"output folder {root}: no task of job '{job.name}' has finished yet; nothing to collect")
+        raise JobError(f"output folder {folder.root}: no task of job '{job.name}' has finished yet; nothing to collect")
     dataset = build_dataset(job, job.solver, rows, mpi_size=1, ranks_per_task=1, partial=True)
     dataset["completed"] = xr.Variable(
         (*job.sweep, "realization"), finished.astype(np.int8).reshape(*job.sweep_shape, job.realizations),
