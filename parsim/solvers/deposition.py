@@ -364,8 +364,7 @@ def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
                              f"{params['max_events_per_particle']} events; raise the limit or check the shape")
     if not np.all(np.isfinite(result.positions)):
         raise NumericalError("non-finite sphere positions in the sediment")
-    region = _measuring_region(params, geometry, result)
-    return TaskResult(statistics.measure(params, result, species, drops, region, skip, substrate),
+    return TaskResult(statistics.measure(params, result, species, drops, geometry, skip, substrate),
                       _configuration(params, geometry, result, species, drops, substrate))
 
 
@@ -414,19 +413,6 @@ def _on_disc(uniform, radius, centre):
     distance = radius * np.sqrt(uniform[:, 0])
     angle = 2.0 * np.pi * uniform[:, 1]
     return np.column_stack([centre[0] + distance * np.cos(angle), centre[1] + distance * np.sin(angle)])
-
-
-def _measuring_region(params, geometry, result) -> statistics.Region:
-    """The horizontal box over which packing and contacts are measured."""
-    if geometry.cylinder is not None:
-        _, _, radius, sides = geometry.cylinder
-        polygon = 0.5 * sides * radius**2 * math.sin(2.0 * math.pi / sides)
-        return statistics.Region(geometry.lower, geometry.upper, False, True, polygon / (2.0 * radius) ** 2)
-    if params["lateral"] != "none":
-        return statistics.Region(geometry.lower, geometry.upper, params["lateral"] == "periodic", True)
-    reach = 2.0 * result.radii.max()  # so that periodic wrapping of the measurement meets no sphere twice
-    return statistics.Region(result.positions[:, :2].min(axis=0) - 2.0 * reach,
-                             result.positions[:, :2].max(axis=0) + 2.0 * reach, False, False)
 
 
 def _configuration(params, geometry, result, species, drops, substrate) -> Configuration:

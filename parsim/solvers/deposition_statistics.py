@@ -13,6 +13,7 @@
 The bulk is the slab ``BULK_SLAB`` of the filling height, away from floor and surface.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -137,8 +138,10 @@ def species_names(constants: dict) -> list[str]:
     return [constants.get("shape", "particles")]
 
 
-def measure(params, result, species, drops, region, skip, substrate) -> dict:
-    """Every statistic of a finished task (``result``: :class:`parsim.core.sdbd.DepositionResult`)."""
+def measure(params, result, species, drops, geometry, skip, substrate) -> dict:
+    """Every statistic of a finished task (``result``: :class:`parsim.core.sdbd.DepositionResult`,
+    ``geometry``: the container as the kernel took it)."""
+    region = measuring_region(params, geometry, result)
     volume = np.array([s.volume for s in species])[drops.species] * drops.scale**3
     height = filling_height(result.center_of_mass[:, 2], volume)
     slab = (BULK_SLAB[0] * height, BULK_SLAB[1] * height)
@@ -166,6 +169,19 @@ def measure(params, result, species, drops, region, skip, substrate) -> dict:
     for name, states in STATE_COUNTS.items():
         statistics[name] = int(np.isin(result.state, states).sum())
     return statistics
+
+
+def measuring_region(params, geometry, result) -> Region:
+    """The horizontal box over which packing and contacts are measured."""
+    if geometry.cylinder is not None:
+        _, _, radius, sides = geometry.cylinder
+        polygon = 0.5 * sides * radius**2 * math.sin(2.0 * math.pi / sides)
+        return Region(geometry.lower, geometry.upper, False, True, polygon / (2.0 * radius) ** 2)
+    if params["lateral"] != "none":
+        return Region(geometry.lower, geometry.upper, params["lateral"] == "periodic", True)
+    reach = 2.0 * result.radii.max()  # so that periodic wrapping of the measurement meets no sphere twice
+    return Region(result.positions[:, :2].min(axis=0) - 2.0 * reach,
+                             result.positions[:, :2].max(axis=0) + 2.0 * reach, False, False)
 
 
 def _packing(params, result, region, height, slab, drops, n_species, positions, radii) -> dict:
