@@ -287,3 +287,22 @@ def test_arguments(files):
         mesh_particle(files["box.stl"], tolerance=-1.0)
     with pytest.raises(FileNotFoundError):
         mesh_particle(files["box.stl"] + ".missing", n_spheres=10)
+
+
+def test_a_mesh_particle_is_scaled_by_the_volume_of_the_mesh_not_of_its_balls(files):
+    """The mesh is scaled to the volume of a sphere of radius sphere_radius; its balls, inside it,
+    hold (1 + volume_error) of that volume."""
+    from parsim.solvers.deposition import PARAMETERS
+    from parsim.solvers.deposition_materials import mesh_approximation, mesh_volume, particle_shape
+
+    params = {p.name: p.default for p in PARAMETERS}
+    params.update(shape="mesh", mesh_file=files["box.stl"], mesh_spheres=20, sphere_radius=0.7)
+    _, radii, union_volume = particle_shape(params)
+    fit = mesh_approximation(params)
+    sphere = 4.0 / 3.0 * math.pi * 0.7**3
+    assert mesh_volume(params) == pytest.approx(sphere, rel=1e-12)
+    assert fit.volume_error < -0.05  # twenty balls leave much of a box's corners empty
+    assert union_volume == pytest.approx(sphere * (1.0 + fit.volume_error), rel=UNION_VOLUME_RTOL)
+    # the largest ball of a 2 x 1 x 0.5 box, in units of its volume-equivalent radius, times 0.7
+    r_eq = (3.0 * 1.0 / (4.0 * math.pi)) ** (1.0 / 3.0)
+    assert radii.max() == pytest.approx(0.7 * BOX_HALF[2] / r_eq, rel=1e-6)

@@ -239,6 +239,12 @@ def mesh_approximation(params: dict):
     return _mesh_spheres(params["mesh_file"], params["mesh_spheres"])[2]
 
 
+def mesh_volume(params: dict) -> float:
+    """Volume enclosed by a mesh species' surface at size factor 1: the mesh is scaled to the volume of
+    a sphere of radius ``sphere_radius`` (its spheres, inside it, hold ``1 + volume_error`` of that)."""
+    return 4.0 / 3.0 * math.pi * params["sphere_radius"] ** 3
+
+
 @functools.lru_cache(maxsize=8)
 def _mesh_spheres(path: str, n_spheres: int):
     try:
@@ -267,11 +273,9 @@ def _built_shape(shape, size, spacing, semi_axes, exponents, n_spheres, agglomer
         offsets, radii = shape_library.ellipsoid(semi_axes, n_spheres)
     elif shape == "superellipsoid":
         offsets, radii = shape_library.superellipsoid(semi_axes, exponents, n_spheres)
-    elif shape == "mesh":  # scaled to the volume-equivalent radius 1 (then sphere_radius)
-        offsets, radii, _ = _mesh_spheres(mesh_file, mesh_spheres)
-        _, volume = shape_library.centre_of_mass_of_union(offsets, radii)
-        unit = (3.0 * volume / (4.0 * math.pi)) ** (1.0 / 3.0)
-        offsets, radii = offsets / unit, radii / unit
+    elif shape == "mesh":  # the mesh (not the union of its balls) scaled to volume-equivalent radius 1
+        offsets, radii, fit = _mesh_spheres(mesh_file, mesh_spheres)
+        offsets, radii = offsets / fit.equivalent_radius, radii / fit.equivalent_radius
     else:
         centres, file_radii = read_agglomerate(agglomerate_file)
         offsets, radii = shape_library.agglomerate(centres / file_radii.mean(), file_radii / file_radii.mean())
