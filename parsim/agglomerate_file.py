@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from parsim.errors import JobError
+from parsim.parameters import LARGEST_QUANTITY
 
 CSV_COLUMNS = ("x", "y", "z", "r")
 
@@ -48,12 +49,19 @@ def _read_spheres(path: Path, with_substrate: bool) -> tuple[np.ndarray, np.ndar
     else:
         raise _Unreadable("allowed: a .csv file (columns x, y, z, r) "
                              "or an HDF5 file (.h5, .hdf5) with spheres/position and spheres/radius")
-    if centres.ndim != 2 or centres.shape[1] not in (2, 3) or centres.shape[0] != len(radii):
-        raise _Unreadable(f"positions of shape {centres.shape} and radii of shape {radii.shape}; "
-                             "allowed: (n, 2) or (n, 3) and (n,)")
+    _check_shapes(centres, radii)
     if len(radii) == 0 or not (np.all(np.isfinite(centres)) and np.all(np.isfinite(radii)) and np.all(radii > 0)):
         raise _Unreadable("needs at least one sphere, finite positions, radii > 0")
+    if max(np.abs(centres).max(), radii.max()) > LARGEST_QUANTITY:
+        raise _Unreadable(f"a position or radius beyond {LARGEST_QUANTITY:g} (in the job's length unit); allowed: "
+                          f"values of magnitude at most {LARGEST_QUANTITY:g}")
     return centres, radii
+
+
+def _check_shapes(centres: np.ndarray, radii: np.ndarray, names=("positions", "radii")) -> None:
+    if centres.ndim != 2 or centres.shape[1] not in (2, 3) or radii.ndim != 1 or centres.shape[0] != len(radii):
+        raise _Unreadable(f"{names[0]} of shape {centres.shape} and {names[1]} of shape {radii.shape}; "
+                          "allowed: (n, 2) or (n, 3) and (n,)")
 
 
 def _read_hdf5(path: Path, with_substrate: bool):
@@ -68,11 +76,23 @@ def _read_hdf5(path: Path, with_substrate: bool):
             raise _Unreadable("an HDF5 agglomerate needs the datasets spheres/position (n, d) "
                                  "and spheres/radius (n,)")
         groups = ("substrate", "spheres") if with_substrate and "substrate/position" in file else ("spheres",)
-        try:
-            return (np.concatenate([np.asarray(file[f"{group}/position"][()], dtype=float) for group in groups]),
-                    np.concatenate([np.asarray(file[f"{group}/radius"][()], dtype=float) for group in groups]))
-        except (TypeError, ValueError):
-            raise _Unreadable("spheres/position and spheres/radius must hold numbers") from None
+        read = [(_numbers_of(file, f"{group}/position"), _numbers_of(file, f"{group}/radius")) for group in groups]
+    for group, (centres, radii) in zip(groups, read):
+        _check_shapes(centres, radii, (f"{group}/position", f"{group}/radius"))
+    if len({centres.shape[1] for centres, _ in read}) > 1:
+        raise _Unreadable("substrate/position and spheres/position have different numbers of columns; allowed: "
+                          "both (n, 3)")
+    return np.concatenate([centres for centres, _ in read]), np.concatenate([radii for _, radii in read])
+
+
+def _numbers_of(file, name: str) -> np.ndarray:
+    """The dataset ``name`` of an open HDF5 file as float64; it must hold integers or floating-point numbers."""
+    import h5py
+
+    item = file.get(name)
+    if not isinstance(item, h5py.Dataset) or item.dtype.kind not in "iuf":
+        raise _Unreadable(f"{name} must be a dataset of numbers (integers or floating point)")
+    return np.asarray(item[()], dtype=float)
 
 
 def _read_csv(path: Path):
@@ -83,6 +103,10 @@ def _read_csv(path: Path):
         raise _Unreadable("the CSV file holds no spheres")
     if has_header:
         names = [name.lower() for name in rows[0][1]]
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise _Unreadable(f"the CSV header names the column(s) {repeated} more than once; allowed: each of "
+                              f"{', '.join(CSV_COLUMNS)} once")
         missing = [c for c in ("x", "y", "r") if c not in names]
         if missing:
             raise _Unreadable(f"the CSV header lacks the column(s) {missing}; "

@@ -35,7 +35,8 @@ from typing import Any
 import numpy as np
 
 from parsim.errors import JobError
-from parsim.parameters import Parameter
+from parsim.machine import check_memory
+from parsim.parameters import Parameter, shown
 from parsim.solver import Solver, TableArray
 
 SI_PREFIXES = ("Y", "Z", "E", "P", "T", "G", "M", "k", "h", "da", "d", "c", "m", "u", "n", "p", "f", "a", "z", "y")
@@ -84,6 +85,10 @@ TOP_LEVEL_KEYS = ("name", "kind", "seed", "realizations", "output", "configurati
                   *(unit.key for unit in UNIT_KEYS), "parameters", "sweep")
 """The keys of every job; a solver adds its arrays of tables (:attr:`parsim.solver.Solver.tables`)."""
 REQUIRED_TOP_LEVEL = ("name", "kind", "seed", "realizations")
+MAX_FILE_NAME_BYTES, MAX_PATH_BYTES = 255, 4096
+"""The longest file name and path of Linux and macOS file systems."""
+MAX_NAME_BYTES = 200
+"""The longest job name, in UTF-8 bytes: NAME.partial.nc stays within the 255 bytes of a file name."""
 TOML_INTEGERS = (-2**63, 2**63 - 1)
 """The integers of a TOML file (64-bit); tomllib returns larger ones too."""
 MAX_SEED = TOML_INTEGERS[1]
@@ -92,9 +97,10 @@ MAX_TASKS = 1_000_000
 CONFIGURATIONS = ("all", "first", "none")
 """Values of the key ``configurations``: which tasks write their final configuration to a task file
 (every task; realisation 0 of every point; none).  The statistics of every task are kept whatever it says."""
+DATASET_COPIES = 3
+"""Copies of every task's statistics that rank 0 holds while it writes the dataset."""
 KEY_BYTES = 16
 """Length of a point's key (:meth:`Job.point_key`): the first 16 bytes of a SHA-256."""
-BINARY_UNITS = ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB", "ZiB", "YiB")
 
 
 @dataclass(frozen=True)
@@ -282,15 +288,10 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
               verify: bool = True) -> Job:
     """Read and validate the job file ``text``.  ``verify=False`` reads the keys alone: no input
     file is read and no point checked (for the copy of an earlier job, whose files may be gone)."""
-    try:
-        document = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise JobError(f"{source}: not valid TOML: {error}") from None
-    except ValueError:  # Python converts integers of at most 4300 digits
-        raise JobError(f"{source}: not valid TOML: an integer far beyond the 64 bits of TOML integers") from None
-
     def fail(message: str):
         raise JobError(f"{source}: {message}")
+
+    document = _toml(text, fail)
 
     _check_integers(document, "", fail)
 
@@ -299,11 +300,10 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
             fail(f"missing key {key!r}")
 
     name = _top(document, "name", str, fail)
-    if not name or any(c in name for c in "/\\") or name.startswith("."):
-        fail(f"name = {name!r}: must be a non-empty file name without slashes")
+    _check_name(name, fail)
     kind = _top(document, "kind", str, fail)
     if kind not in solvers:
-        fail(f"kind = {kind!r}: allowed: {', '.join(repr(k) for k in solvers)}")
+        fail(f"kind = {shown(kind)}: allowed: {', '.join(repr(k) for k in solvers)}")
     solver = solvers[kind]
     allowed = (*TOP_LEVEL_KEYS, *(table.name for table in solver.tables))
     unknown = [key for key in document if key not in allowed]
@@ -316,8 +316,7 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
     if realizations < 1:
         fail(f"realizations = {realizations}: allowed: an integer >= 1")
     out = output if output is not None else document.get("output", f"output/{name}")
-    if not isinstance(out, (str, Path)):
-        fail(f"output = {out!r}: must be a string (a folder path)")
+    _check_output_path(out, fail)
 
     units = {unit.quantity: _unit(document, unit, fail) for unit in UNIT_KEYS}
     fixed, sweep = _parameters(document, solver, source, fail)
@@ -329,7 +328,7 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
              f"allowed: at most {MAX_TASKS} tasks; lower realizations or the [sweep]")
     configurations = document.get("configurations", "all")
     if configurations not in CONFIGURATIONS:
-        fail(f"configurations = {configurations!r}: allowed: {', '.join(repr(c) for c in CONFIGURATIONS)}")
+        fail(f"configurations = {shown(configurations)}: allowed: {', '.join(repr(c) for c in CONFIGURATIONS)}")
     hashes = _input_hashes(solver, fixed, sweep, tables, fail) if verify else {}
     job = Job(name=name, kind=kind, seed=seed, realizations=realizations, output=Path(out), fixed=fixed,
               sweep=sweep, text=text, input_hashes=hashes, units=units, tables=tables,
@@ -344,7 +343,46 @@ def parse_job(text: str, solvers: dict[str, Solver], source: str = "<job>", outp
         except JobError as error:
             fail(f"sweep point {job.describe_point(point)}: {error}" if sweep else str(error))
     _check_distinct_points(job, fail)
+    try:
+        _check_dataset_memory(job)
+    except JobError as error:
+        fail(str(error))
     return job
+
+
+def _toml(text: str, fail) -> dict:
+    """The TOML document ``text``; an integer too long for Python to convert is named by its key."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        fail(f"not valid TOML: {error}")
+    except ValueError:  # Python converts integers of at most sys.get_int_max_str_digits() (4300) digits
+        long = _LONG_INTEGER.search(text)
+        line = text.count("\n", 0, long.start()) + 1 if long else 0
+        key = re.match(r"\s*([^=\s]+)\s*=", text.splitlines()[line - 1]) if long else None
+        where = f"line {line}: {key.group(1) if key else 'a value'} = an integer of {len(long.group())} digits" \
+            if long else "an integer of thousands of digits"
+        fail(f"{where}; allowed: integers of at most 64 bits ({TOML_INTEGERS[0]} to {TOML_INTEGERS[1]})")
+
+
+_LONG_INTEGER = re.compile(r"\d{4000,}")
+
+
+def _check_name(name: str, fail) -> None:
+    """The job's name names its dataset file, NAME.nc and NAME.partial.nc: refuse what no file name can be."""
+    if (not name or "/" in name or "\\" in name or name.startswith(".")
+            or any(ord(c) < 32 or ord(c) == 127 for c in name) or len(name.encode()) > MAX_NAME_BYTES):
+        fail(f"name = {shown(name)}: allowed: a file name of 1 to {MAX_NAME_BYTES} bytes (UTF-8) without slashes, "
+             "control characters (NUL, newline, tab, ...) or a leading dot")
+
+
+def _check_output_path(out: Any, fail) -> None:
+    """The output folder must be a path this system can hold: no NUL, names of at most 255 bytes."""
+    if (not isinstance(out, (str, Path)) or not str(out) or "\0" in str(out)
+            or len(os.fsencode(out)) > MAX_PATH_BYTES or any(len(os.fsencode(part)) > MAX_FILE_NAME_BYTES
+                                                             for part in Path(out).parts)):
+        fail(f"output = {shown(out)}: allowed: a folder path, a non-empty string without NUL characters, of at most "
+             f"{MAX_PATH_BYTES} bytes with names of at most {MAX_FILE_NAME_BYTES} bytes")
 
 
 def _check_distinct_points(job: Job, fail) -> None:
@@ -390,10 +428,10 @@ def _parameters(document: dict, solver: Solver, source: str, fail) -> tuple[dict
         if not parameter.sweepable:
             fail(f"[sweep] {key!r} cannot be swept (it changes the shape of the outputs); set it in [parameters]")
         if not isinstance(values, list) or not values:
-            fail(f"[sweep] {key} = {values!r}: must be a non-empty list of values")
+            fail(f"[sweep] {key} = {shown(values)}: must be a non-empty list of values")
         coerced = [parameter.coerce(v, f"{source}: [sweep] {key}[{i}]") for i, v in enumerate(values)]
         if len(set(coerced)) != len(coerced):
-            fail(f"[sweep] {key} = {values!r}: values must be distinct")
+            fail(f"[sweep] {key} = {shown(values)}: values must be distinct")
         sweep[key] = coerced
 
     fixed = {}
@@ -450,46 +488,47 @@ def _input_hashes(solver: Solver, fixed: dict, sweep: dict, tables: dict, fail) 
 
 
 def _sha256(key: str, path: str, fail) -> str:
-    if not Path(path).is_file():
-        fail(f"{key} = {path!r}: no such file")
+    if "\0" in path:
+        fail(f"{key} = {shown(path)}: allowed: a file path, without NUL characters")
     try:
+        if not Path(path).is_file():
+            fail(f"{key} = {shown(path)}: no such file")
         with open(path, "rb") as file:
             return hashlib.file_digest(file, "sha256").hexdigest()
     except OSError as error:
-        fail(f"{key} = {path!r}: cannot read the file ({error.strerror})")
+        fail(f"{key} = {shown(path)}: cannot read the file ({error.strerror})")
+
+
+def _check_dataset_memory(job: Job) -> None:
+    """Refuse a job whose dataset, assembled on rank 0 from the rows of every task, needs more memory than
+    this machine has: ``DATASET_COPIES`` copies of every task's row (the rows read, the variables, the write)."""
+    constants = job.constants
+    observable = job.solver.coordinates(constants)
+    row = sum(np.dtype(s.dtype).itemsize * math.prod(len(observable[d].values) for d in s.dims)
+              for s in job.solver.statistics)
+    tasks = job.n_points * job.realizations
+    sizes = [f"{p.name}={constants[p.name]!r}" for p in job.solver.parameters if p.type is int and not p.sweepable]
+    check_memory(DATASET_COPIES * row * tasks, "the dataset",
+                 f"{tasks} tasks x {row} bytes per task's statistics, with {', '.join(sizes)}")
 
 
 def _check_memory(solver: Solver, params: dict) -> None:
     """Refuse a point whose task would need more memory than this machine has."""
-    need, total = solver.memory(params), _physical_memory()
-    if need > total:
-        keys = ", ".join(f"{key}={params[key]!r}" for key in solver.memory_keys(params))
-        raise JobError(f"one task needs about {_in_binary_units(need)} of memory (estimated from {keys}), "
-                       f"more than this machine's {_in_binary_units(total)}")
-
-
-def _physical_memory() -> int:
-    """This machine's physical memory in bytes."""
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-
-
-def _in_binary_units(n_bytes: int) -> str:
-    """``n_bytes`` to three digits in the largest binary unit it reaches, e.g. '23.4 GiB'."""
-    exponent = min(max(n_bytes.bit_length() - 1, 0) // 10, len(BINARY_UNITS) - 1)
-    return f"{n_bytes / 1024**exponent:.3g} {BINARY_UNITS[exponent]}"
+    keys = ", ".join(f"{key}={params[key]!r}" for key in solver.memory_keys(params))
+    check_memory(solver.memory(params), "one task", keys)
 
 
 def _top(document: dict, key: str, expected: type, fail) -> Any:
     value = document[key]
     if not isinstance(value, expected) or isinstance(value, bool):
-        fail(f"{key} = {value!r}: must be {'an integer' if expected is int else 'a string'}")
+        fail(f"{key} = {shown(value)}: must be {'an integer' if expected is int else 'a string'}")
     return value
 
 
 def _unit(document: dict, unit: UnitKey, fail) -> str:
     symbol = document.get(unit.key, unit.default)
     if not unit.accepts(symbol):
-        fail(f"{unit.key} = {symbol!r}: allowed: {unit.allowed()}")
+        fail(f"{unit.key} = {shown(symbol)}: allowed: {unit.allowed()}")
     return symbol
 
 

@@ -13,6 +13,10 @@ from parsim.errors import JobError
 
 REQUIRED = object()
 """Default of a parameter that every job must give."""
+LARGEST_QUANTITY = 1e30
+"""Upper bound of a length, mass or speed a job gives, in the job's units.  Any physical size in
+any unit a job may name (SI prefixes y to Y) lies far below it, and products of a few such numbers
+(areas, volumes, a box of N spheres) stay far from the overflow of double precision at 1.8e308."""
 
 _TYPE_NAMES = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
 
@@ -22,7 +26,8 @@ class Parameter:
     """One model or run parameter of a solver (a ``default`` of None: may be left unset).
 
     ``low``/``high`` bound numbers (``*_inclusive`` says whether the bound itself
-    is allowed); ``choices`` lists the allowed strings or numbers.  A parameter
+    is allowed); a number is finite unless ``high`` is ``math.inf`` (a limit that ``inf``
+    lifts); ``choices`` lists the allowed strings or numbers.  A parameter
     with ``sweepable=False`` changes the shape of the outputs and must be fixed
     for the whole job.  ``affects_seed=False`` marks a choice of method: tasks
     that differ only in it get the same random stream, hence the same initial
@@ -65,7 +70,9 @@ class Parameter:
         if self.low is not None:
             parts.append(f"{_fmt(self.low)} {'<=' if self.low_inclusive else '<'} ")
         parts.append(self.name)
-        if self.high is not None:
+        if self.high == math.inf:
+            parts.append(" (inf: no limit)")
+        elif self.high is not None:
             parts.append(f" {'<=' if self.high_inclusive else '<'} {_fmt(self.high)}")
         text = "".join(parts)
         return f"{_TYPE_NAMES[self.type]}, {text}" if len(parts) > 1 else _TYPE_NAMES[self.type]
@@ -78,11 +85,11 @@ class Parameter:
         if self.type is float and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
         if not isinstance(value, self.type) or (self.type is not bool and isinstance(value, bool)):
-            raise JobError(f"{where} = {value!r}: must be {_TYPE_NAMES[self.type]}; allowed: {self.allowed()}")
-        if self.type is float and math.isnan(value):
-            raise JobError(f"{where} = nan: allowed: {self.allowed()}")
+            raise JobError(f"{where} = {shown(value)}: must be {_TYPE_NAMES[self.type]}; allowed: {self.allowed()}")
+        if self.type is float and (math.isnan(value) or (math.isinf(value) and self.high != math.inf)):
+            raise JobError(f"{where} = {value!r}: must be a finite number; allowed: {self.allowed()}")
         if self.choices is not None and value not in self.choices:
-            raise JobError(f"{where} = {value!r}: allowed: {self.allowed()}")
+            raise JobError(f"{where} = {shown(value)}: allowed: {self.allowed()}")
         if self.type in (int, float) and not self._in_range(value):
             raise JobError(f"{where} = {value!r} is out of range; allowed: {self.allowed()}")
         return value
@@ -95,5 +102,14 @@ class Parameter:
         return True
 
 
+def shown(value: Any, limit: int = 80) -> str:
+    """``repr(value)`` as a one-line message shows it: cut short, with its length, beyond ``limit`` characters."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit - 20]}... ({len(text)} characters)"
+
+
 def _fmt(number: float) -> str:
-    return repr(number) if not isinstance(number, float) or not number.is_integer() else str(int(number))
+    """A bound as messages show it: 50, 0.01, 1e+30 (not 1000000000000000019884624838656)."""
+    if isinstance(number, float) and number.is_integer() and abs(number) < 1e16:
+        return str(int(number))
+    return repr(number)

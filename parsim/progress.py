@@ -1,4 +1,4 @@
-"""Rank 0's progress over the tasks of a job: done, elapsed, remaining.
+"""Rank 0's progress over the tasks of a job (done, elapsed, remaining), and over long preparation.
 
 Tasks run costliest first and their costs differ a hundredfold, so progress that
 counted tasks would predict the end from the slowest ones and overestimate the
@@ -11,16 +11,27 @@ On a terminal this is a bar redrawn in place.  Elsewhere (a batch system's log
 file, a pipe) it is one plain line per finished batch of tasks, at most every
 ``LOG_INTERVAL`` seconds and always for the last task, so that a log holds a
 readable history instead of thousands of carriage returns.
+
+Preparation that may take more than a few seconds before any task (building a particle of
+thousands of spheres) says what it does, its estimated time and, every few seconds, the time
+elapsed (:func:`preparing`).
 """
 
 import math
 import sys
+import threading
 import time
+from contextlib import contextmanager
 
 from tqdm import tqdm
 
 #: Seconds between two progress lines when standard error is not a terminal.
 LOG_INTERVAL = 5.0
+#: Preparation (building a particle, say) estimated to take longer than this says so, and how far it got.
+ANNOUNCED_PREPARATION_SECONDS = 3.0
+#: Seconds between two lines of a preparation under way.
+PREPARATION_INTERVAL = 10.0
+_preparation_announced = [True]  # off on the ranks other than 0 and with --quiet (:func:`announcing_preparation`)
 
 
 class TaskProgress:
@@ -84,3 +95,43 @@ class _ProgressLines:
         elapsed = now - self._start
         left = elapsed * max(self._cost_to_do - self._cost_done, 0.0) / self._cost_done if self._cost_done > 0 else 0.0
         return f"{tqdm.format_interval(elapsed)} elapsed, {tqdm.format_interval(left)} left"
+
+
+@contextmanager
+def announcing_preparation(enabled: bool):
+    """Within the block, :func:`preparing` prints (``enabled``) or keeps silent."""
+    before = _preparation_announced[0]
+    _preparation_announced[0] = enabled
+    try:
+        yield
+    finally:
+        _preparation_announced[0] = before
+
+
+@contextmanager
+def preparing(what: str, estimated_seconds: float, clock=time.monotonic):
+    """Report on standard error the preparation of ``what`` while the block runs, if it is estimated to
+    take more than ``ANNOUNCED_PREPARATION_SECONDS``: a line when it starts, with the estimate, one every
+    ``PREPARATION_INTERVAL`` seconds with the time elapsed, and one when it is done.
+
+    The lines come from a thread, which runs while the block computes in a jitted kernel (the kernels
+    release the GIL).
+    """
+    if estimated_seconds <= ANNOUNCED_PREPARATION_SECONDS or not _preparation_announced[0]:
+        yield
+        return
+    print(f"parsim: {what} (about {tqdm.format_interval(estimated_seconds)})...", file=sys.stderr, flush=True)
+    start, done = clock(), threading.Event()
+
+    def report() -> None:
+        while not done.wait(PREPARATION_INTERVAL):
+            print(f"parsim: {what}: {tqdm.format_interval(clock() - start)} elapsed", file=sys.stderr, flush=True)
+
+    reporter = threading.Thread(target=report, name="parsim-preparation", daemon=True)
+    reporter.start()
+    try:
+        yield
+    finally:
+        done.set()
+        reporter.join()
+    print(f"parsim: {what}: done in {tqdm.format_interval(clock() - start)}", file=sys.stderr, flush=True)

@@ -41,7 +41,7 @@ from parsim.output.rows import RowWriter
 from parsim.output.snapshot import write_task_file
 from parsim.parallel.collective import on_root, wait_for
 from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
-from parsim.progress import TaskProgress
+from parsim.progress import TaskProgress, announcing_preparation
 from parsim.solver import TaskResult
 
 
@@ -172,8 +172,11 @@ def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult | None:
 
 
 def task_attributes(job: Job, task: Task) -> dict:
-    """The root attributes of ``task``'s file: its parameters, input files, units and origin."""
-    return {**job.point_parameters(task.point), **job.table_attributes, **job.input_attributes, **job.unit_attributes,
+    """The root attributes of ``task``'s file: the parameters it reads (a cylinder's task has no
+    ``lateral``, an ED task no DAHA key), its input files, units and origin."""
+    params = job.point_parameters(task.point)
+    read = {p.name: params[p.name] for p in job.solver.parameters if p.is_read(params)}
+    return {**read, **job.table_attributes, **job.input_attributes, **job.unit_attributes,
             "job_name": job.name, "job_seed": job.seed, "spawn_key": list(job.seed_sequence(task).spawn_key),
             "task": task.label, "realization": task.realization}
 
@@ -197,8 +200,9 @@ def warm_up(job: Job, pending: list[Task], announce: bool) -> None:
         print("parsim: preparing the kernels (compiled once per machine, up to a few minutes; loaded from the cache "
               "afterwards)...", file=sys.stderr, flush=True)
     start = time.perf_counter()
-    for small in rehearsals.values():
-        solver.solve(small, np.random.default_rng(0), MPI.COMM_SELF)
+    with announcing_preparation(announce):  # the particles are built here on every rank; rank 0 speaks
+        for small in rehearsals.values():
+            solver.solve(small, np.random.default_rng(0), MPI.COMM_SELF)
     if announce:
         print(f"parsim: kernels ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 

@@ -70,9 +70,11 @@ def test_header_semicolons_whitespace_and_order_parse_identically(tmp_path):
 
 MALFORMED = {
     "one sieve": ("size,passing\n1.0,100\n", "line 2", "at least 2"),
-    "zero size": ("1,0\n0,50\n2,100\n", "line 2", "size > 0"),
-    "negative size": ("1,0\n-1,50\n2,100\n", "line 2", "size > 0"),
-    "infinite size": ("1,0\ninf,100\n", "line 2", "size > 0"),
+    "zero size": ("1,0\n0,50\n2,100\n", "line 2", "a size from 1e-30 to 1e+30"),
+    "negative size": ("1,0\n-1,50\n2,100\n", "line 2", "a size from 1e-30 to 1e+30"),
+    "infinite size": ("1,0\ninf,100\n", "line 2", "a size from 1e-30 to 1e+30"),
+    "size whose cube is below double precision": ("1e-200,10\n1e-199,100\n", "line 1", "a size from 1e-30"),
+    "size whose cube overflows": ("1e200,10\n1e201,100\n", "line 1", "to 1e+30"),
     "duplicate size": ("1,0\n2,100\n1.0,50\n", "lines 1 and 3", "each size once"),
     "passing above 100": ("1,0\n1.5,101\n2,100\n", "line 2", "0 to 100"),
     "passing below 0": ("1,-1\n2,100\n", "line 1", "0 to 100"),

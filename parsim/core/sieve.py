@@ -12,7 +12,7 @@ rows in any order (they are sorted by size).  The percentages are by mass (the u
 grading curve) or by number of particles: the caller says which (``basis``).
 
 Required, else a :class:`JobError` naming the file and the line: at least two sieves;
-sizes finite, > 0 and each given once; percent passing in [0, 100] and never decreasing as
+sizes from 1e-30 to 1e30, each given once; percent passing in [0, 100] and never decreasing as
 the size grows; exactly 100 % passing the largest sieve.
 
 Conventions
@@ -44,6 +44,8 @@ from parsim.errors import JobError
 
 #: What the percent passing of a sieve curve counts.
 BASES = ("mass", "number")
+#: The sizes a sieve may have: their cubes (particle volumes) and inverse cubes stay within double precision.
+SMALLEST_SIZE, LARGEST_SIZE = 1e-30, 1e30
 
 
 @dataclass(frozen=True)
@@ -176,8 +178,9 @@ def _sieve(path: Path, number: int, cells: list[str]) -> tuple[float, float]:
     if len(cells) != 2 or not all(map(_is_number, cells)):
         raise _invalid(path, f"line {number} holds {cells}; allowed: two numbers, sieve size and percent passing")
     size, percent = float(cells[0]), float(cells[1])
-    if not (math.isfinite(size) and size > 0.0):
-        raise _invalid(path, f"line {number}: sieve size {cells[0]}; allowed: a finite size > 0")
+    if not SMALLEST_SIZE <= size <= LARGEST_SIZE:
+        raise _invalid(path, f"line {number}: sieve size {cells[0]}; allowed: a size from {SMALLEST_SIZE:g} to "
+                             f"{LARGEST_SIZE:g}")
     if not 0.0 <= percent <= 100.0:
         raise _invalid(path, f"line {number}: {cells[1]} % passing; allowed: 0 to 100")
     return size, percent

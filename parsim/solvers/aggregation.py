@@ -26,7 +26,7 @@ from parsim.core.initial import (box_length_for_volume_fraction, isotropic_veloc
 from parsim.core.statistics import MIN_FIT_BOX_SIZES, cluster_statistics, fit_box_sizes, pair_distribution_grid
 from parsim.core.ts import FORMULATIONS, DahaParameters, MinimiserFailure, simulate_ts
 from parsim.errors import JobError, NumericalError
-from parsim.parameters import REQUIRED, Parameter
+from parsim.parameters import LARGEST_QUANTITY, REQUIRED, Parameter
 from parsim.solver import (LENGTH_UNITS, MASS_UNITS, SPEED_UNITS, TIME_UNITS, Configuration, Coordinate, Solver,
                            Statistic, TaskResult, coded_coordinate, flag_attributes)
 
@@ -40,6 +40,14 @@ COMPONENTS = ("x", "y", "z")  # names of the Cartesian components, coded 0, 1, 2
 _DAHA = DahaParameters()
 BYTES_PER_SPHERE = 1536  # one task's memory per sphere, see memory()
 WARM_UP_SIDE = {2: 4, 3: 3}  # spheres per side of the warm-up's lattice: 16 discs, 27 spheres
+# Upper bounds of keys beyond which a value means nothing and only costs: a contact at 10 R is no
+# contact, and the search for it grows as the factor to the power d; P(r) sampled at more than
+# 10^4 points on 2R..20R resolves nothing a cluster has; an attraction beyond 20 R reaches across
+# whole clusters; the DAHA coefficients (default 0.3 to 30) are unstable far below 10^6.
+MAX_CONTACT_FACTOR = 10.0
+MAX_PAIR_DISTRIBUTION_POINTS = 10_000
+MAX_ATTRACTION_RANGE = 20.0
+MAX_DAHA_COEFFICIENT = 1e6
 
 
 def _reads_ts(params: dict) -> bool:
@@ -72,49 +80,54 @@ PARAMETERS = (
               "uniformly random directions, eq. 4.3) or 'unit_lattice_uniform' (supplementary A: lattice "
               "of spacing 1, box length ceil(N^(1/d)), velocities uniform in [-1/2, 1/2]^d)",
               choices=(PAPER_INITIAL_CONDITION, SUPPLEMENTARY_INITIAL_CONDITION)),
-    Parameter("radius", float, 0.2, LENGTH_UNITS, "sphere radius R", low=0.0, low_inclusive=False),
-    Parameter("mass", float, 1.0, MASS_UNITS, "sphere mass m", low=0.0, low_inclusive=False),
+    Parameter("radius", float, 0.2, LENGTH_UNITS, "sphere radius R", low=0.0, low_inclusive=False,
+              high=LARGEST_QUANTITY),
+    Parameter("mass", float, 1.0, MASS_UNITS, "sphere mass m", low=0.0, low_inclusive=False, high=LARGEST_QUANTITY),
     Parameter("speed", float, 1.0, SPEED_UNITS, "initial speed |V| (eq. 4.3)",
-              low=0.0, low_inclusive=False, read_when=_reads_speed),
+              low=0.0, low_inclusive=False, high=LARGEST_QUANTITY, read_when=_reads_speed),
     Parameter("max_time", float, math.inf, TIME_UNITS, "stop at this time if several clusters remain",
-              low=0.0, low_inclusive=False),
+              low=0.0, low_inclusive=False, high=math.inf),
     Parameter("max_events", int, 10**10, "1",
               "stop after this many events (ed) or time steps (ts) if several clusters remain", low=1),
     Parameter("contact_factor", float, 2.1, "1", "alpha_R of eq. 4.6: centres closer than alpha_R R are in contact",
-              low=2.0),
+              low=2.0, high=MAX_CONTACT_FACTOR),
     Parameter("pair_distribution_points", int, 72, "1", "number of r values of P(r) on 2R < r <= 20R (eq. 4.7)",
-              low=2, sweepable=False),
+              low=2, high=MAX_PAIR_DISTRIBUTION_POINTS, sweepable=False),
     Parameter("box_levels", int, 12, "1", "box-counting levels m = 1..box_levels, eps_m = L / 2^m (eq. 4.8)",
               low=2, high=30, sweepable=False),
     _ts("time_step_factor", float, 0.005, "1", "dt(0) = factor L / max|V| (Table 1: 0.005, 0.01, 0.015); "
-        "dt grows as ln(mean cluster size) to 2 dt(0) at one cluster", low=0.0, low_inclusive=False),
+        "dt grows as ln(mean cluster size) to 2 dt(0) at one cluster", low=0.0, low_inclusive=False, high=1.0),
     _ts("formulation", str, "almost_rigid", "1", "'almost_rigid' (section 3.3: tiles, local attraction) or "
         "'non_rigid' (section 3.1: whole interacting clusters move)", choices=FORMULATIONS),
     _ts("attraction_range", float, 4.0, "1", "Delta_W of eq. 3.30 in units of R (almost_rigid)",
-        low=2.0),
+        low=2.0, high=MAX_ATTRACTION_RANGE),
     _ts("daha_damping", float, _DAHA.damping, "1", "DAHA damping c (c_bar of eq. 3.29 if daha_dynamic); "
-        "eq. 4.1 has 1.3, which with daha_penalty 0.3 is unstable", low=0.0, low_inclusive=False),
+        "eq. 4.1 has 1.3, which with daha_penalty 0.3 is unstable", low=0.0, low_inclusive=False,
+        high=MAX_DAHA_COEFFICIENT),
     _ts("daha_step", float, _DAHA.step, "1", "DAHA artificial time step delta (eq. 4.1)", low=0.0,
-        low_inclusive=False),
-    _ts("daha_attraction", float, _DAHA.attraction, "1", "DAHA alpha (eq. 4.1)", low=0.0, low_inclusive=False),
-    _ts("daha_penalty", float, _DAHA.penalty, "1", "DAHA gamma; eq. 4.1 has 0.3", low=0.0),
+        low_inclusive=False, high=1.0),
+    _ts("daha_attraction", float, _DAHA.attraction, "1", "DAHA alpha (eq. 4.1)", low=0.0, low_inclusive=False,
+        high=MAX_DAHA_COEFFICIENT),
+    _ts("daha_penalty", float, _DAHA.penalty, "1", "DAHA gamma; eq. 4.1 has 0.3", low=0.0,
+        high=MAX_DAHA_COEFFICIENT),
     _ts("daha_multiplier_rate", float, _DAHA.multiplier_rate, "1", "DAHA beta (beta_bar of eq. 3.29 if "
-        "daha_dynamic); eq. 4.1 has 3", low=0.0, low_inclusive=False),
+        "daha_dynamic); eq. 4.1 has 3", low=0.0, low_inclusive=False, high=MAX_DAHA_COEFFICIENT),
     _ts("daha_dynamic", bool, _DAHA.dynamic, "1", "damping and multiplier rate from eq. 3.29 (with a "
         "stability cap) instead of constants"),
     _ts("daha_overlap_tolerance", float, _DAHA.overlap_tolerance, LENGTH_UNITS, "eps_c of eq. 3.28 (eq. 4.1)",
-        low=0.0, low_inclusive=False),
+        low=0.0, low_inclusive=False, high=LARGEST_QUANTITY),
     _ts("daha_steadiness_tolerance", float, _DAHA.steadiness_tolerance, LENGTH_UNITS,
-        "eps_s of eq. 3.27 (eq. 4.1)", low=0.0, low_inclusive=False),
+        "eps_s of eq. 3.27 (eq. 4.1)", low=0.0, low_inclusive=False, high=LARGEST_QUANTITY),
     _ts("daha_max_overlap_tolerance", float, _DAHA.max_overlap_tolerance, LENGTH_UNITS,
         "bound on the deepest overlap sqrt(phi_ij) at convergence (ours; the mean of eq. 3.28 alone hides "
-        "single deep overlaps)", low=0.0, low_inclusive=False),
-    _ts("daha_initial_multiplier", float, _DAHA.initial_multiplier, "1", "lambda of eq. 3.26", low=0.0),
+        "single deep overlaps)", low=0.0, low_inclusive=False, high=LARGEST_QUANTITY),
+    _ts("daha_initial_multiplier", float, _DAHA.initial_multiplier, "1", "lambda of eq. 3.26", low=0.0,
+        high=MAX_DAHA_COEFFICIENT),
     _ts("daha_carry_multipliers", bool, _DAHA.carry_multipliers, "1", "a link starts each minimisation from "
         "its multiplier at the end of the previous one (false: eq. 3.26 for every pair, 10x slower)"),
     _ts("daha_sleep_tolerance", float, _DAHA.sleep_tolerance, LENGTH_UNITS, "a sphere that moved at most this in "
         "a full DAHA sweep, and overlaps no partner by more than eps_c, is skipped until a partner moves "
-        "(0: every sphere in every iteration)", low=0.0),
+        "(0: every sphere in every iteration)", low=0.0, high=LARGEST_QUANTITY),
     _ts("daha_max_iterations", int, _DAHA.max_iterations, "1", "DAHA iterations before a minimisation is "
         "reported as not converged", low=1),
 )
@@ -163,7 +176,12 @@ def check(params: dict) -> None:
     if initial == SUPPLEMENTARY_INITIAL_CONDITION and params["volume_fraction"] is not None:
         raise JobError("volume_fraction must not be given with initial_condition = 'unit_lattice_uniform' "
                        "(the box length follows from the unit lattice spacing)")
-    spacing = lattice_spacing(params["n_spheres"], params["dimension"], box_length(params))
+    length = box_length(params)
+    if not length <= LARGEST_QUANTITY:
+        raise JobError(f"the box length L = {length:.6g} that radius = {params['radius']!r} and volume_fraction = "
+                       f"{params['volume_fraction']!r} give for n_spheres = {params['n_spheres']} exceeds "
+                       f"{LARGEST_QUANTITY:g}; allowed: a smaller radius or a larger volume_fraction")
+    spacing = lattice_spacing(params["n_spheres"], params["dimension"], length)
     if not spacing > 2.0 * params["radius"]:
         raise JobError(f"the initial lattice does not fit in the box: spacing {spacing:.6g} must exceed the "
                        f"diameter 2R = {2 * params['radius']:.6g} (condition 4.2, L^d > (2R)^d N); "

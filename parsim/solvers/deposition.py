@@ -14,6 +14,7 @@ of the group wait.
 """
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +24,8 @@ from parsim.core import sdbd
 from parsim.core import shapes as shape_library
 from parsim.core.sediment import MAX_POINTS_PER_CAP
 from parsim.errors import JobError, NumericalError
-from parsim.parameters import REQUIRED, Parameter
+from parsim.machine import check_memory
+from parsim.parameters import LARGEST_QUANTITY, REQUIRED, Parameter
 from parsim.solver import LENGTH_UNITS, Configuration, Solver, TableArray, TaskResult
 from parsim.solvers import deposition_statistics as statistics
 from parsim.solvers.deposition_materials import (
@@ -51,10 +53,24 @@ BYTES_PER_PARTICLE = 512  # the terms of one task's memory estimate, see memory(
 BYTES_PER_SEDIMENT_SPHERE = 128
 BYTES_PER_SMOOTH_SHAPE_SPHERE = 3072
 BYTES_PER_CAP_POINT = 48
+MESH_BUILD_BYTES = 64 << 20  # building a mesh particle: samples, candidate balls, evaluation points
+BYTES_PER_MESH_FILE_BYTE = 20  # ... and the triangles, per byte of the mesh file
+BYTES_PER_GRID_COLUMN = 72  # a column of the sediment grid: its first 8 cells and its height
 CYLINDER_FLATNESS = 0.01  # automatic container_sides: the polygon departs from the circle by at most this
 # times the smallest sphere radius
 WARM_UP_PARTICLES = 4  # particles of the warm-up run, which compiles the kernels before any task
 WARM_UP_PACKING_SAMPLES = 1000  # the fewest allowed
+# Upper bounds of keys beyond which a value means nothing and only costs time or memory:
+MAX_SHAPE_SIZE = 1000  # a rod of 1000 spheres; a cube of L = 1000 has 6 million
+MAX_SEMI_AXIS = 1000.0  # sphere radii: no set of shape_spheres spheres approximates a thinner body
+MAX_SHAPE_SPHERES = 100_000  # a (super)ellipsoid of 10^5 spheres takes about 2 min to build
+MAX_MESH_SPHERES = 10_000  # medial balls of a mesh: 10^4 take about 40 s (the cost grows as their square)
+MAX_CONTAINER_SIDES = 100_000  # flat to 1e-9 of its radius; the automatic count stays far below
+MAX_SIZE_SPREAD = 3.0  # lognormal: factors exp(+-6 x 3) span 15 decades of volume
+MAX_PROFILE_BINS = 10_000
+MAX_PACKING_SAMPLES = 10_000_000  # per slab: QMC error ~1e-6 already at 10^5-10^6
+MAX_SHARE = 1e9  # shares are normalised; a species of one part in 10^9 is absent from any sediment
+MAX_HEAP_EXTENTS = 1e6  # drop_radius in particle extents: a heap wider than that is no heap
 
 @dataclass(frozen=True)
 class _ReadWhen:
@@ -136,22 +152,22 @@ PARAMETERS = (
               "polydisperse spheres, Fig. 1d-f); agglomerate (the spheres of agglomerate_file); mesh (mesh_spheres "
               "medial balls of the closed surface mesh mesh_file)", choices=SHAPES),
     Parameter("shape_size", int, 5, "1", "L of spiky and cube; spheres of a rod, of each arm of four_rods, "
-              "of each leg of a tripod", low=1, read_when=_SIZED_SHAPES),
+              "of each leg of a tripod", low=1, high=MAX_SHAPE_SIZE, read_when=_SIZED_SHAPES),
     Parameter("shape_spacing", float, 1.0, "1", "centre distance of neighbouring spheres in rod, four_rods "
               "and tripod, in sphere radii (< 2: overlapping; 1 gives Fig. 1a)", low=0.0, high=2.0,
               low_inclusive=False, read_when=_CHAINS),
     Parameter("semi_axis_x", float, 4.0, "1", "ellipsoid/superellipsoid semi-axis along x, in sphere_radius units",
-              low=0.0, low_inclusive=False, read_when=_SMOOTH),
+              low=0.0, low_inclusive=False, high=MAX_SEMI_AXIS, read_when=_SMOOTH),
     Parameter("semi_axis_y", float, 3.0, "1", "semi-axis along y, in sphere_radius units", low=0.0,
-              low_inclusive=False, read_when=_SMOOTH),
+              low_inclusive=False, high=MAX_SEMI_AXIS, read_when=_SMOOTH),
     Parameter("semi_axis_z", float, 2.0, "1", "semi-axis along z, in sphere_radius units", low=0.0,
-              low_inclusive=False, read_when=_SMOOTH),
+              low_inclusive=False, high=MAX_SEMI_AXIS, read_when=_SMOOTH),
     Parameter("exponent_vertical", float, 2.0, "1", "superellipsoid exponent e1 (north-south; 2: ellipsoid)",
               low=1.0, high=20.0, low_inclusive=False, read_when=_SUPERELLIPSOID),
     Parameter("exponent_horizontal", float, 2.0, "1", "superellipsoid exponent e2 (east-west; 2: ellipsoid)",
               low=1.0, high=20.0, low_inclusive=False, read_when=_SUPERELLIPSOID),
     Parameter("shape_spheres", int, 1785, "1", "number of spheres approximating an ellipsoid or superellipsoid "
-              "(Fig. 1d: 1785)", low=1, read_when=_SMOOTH),
+              "(Fig. 1d: 1785)", low=1, high=MAX_SHAPE_SPHERES, read_when=_SMOOTH),
     Parameter("agglomerate_file", str, "", "1", "CSV (x, y, z, r) or HDF5 (spheres/position, spheres/radius, e.g. "
               "an aggregation task file) holding the agglomerate; it is rescaled to mean radius sphere_radius",
               is_file=True, read_when=_AGGLOMERATE),
@@ -159,24 +175,25 @@ PARAMETERS = (
               "mesh_spheres overlapping medial balls and scaled to the volume of a sphere of radius sphere_radius",
               is_file=True, read_when=_MESH),
     Parameter("mesh_spheres", int, 100, "1", "number of medial balls approximating mesh_file (the approximation's "
-              "volume error and surface distance are recorded per species)", low=1, read_when=_MESH),
+              "volume error and surface distance are recorded per species)", low=1, high=MAX_MESH_SPHERES,
+              read_when=_MESH),
     Parameter("sphere_radius", float, 0.5, LENGTH_UNITS, "radius of the particles' spheres (the default 0.5 "
               "makes lengths count sphere diameters); shape lengths are in units of it",
-              low=0.0, low_inclusive=False),
+              low=0.0, low_inclusive=False, high=LARGEST_QUANTITY),
     Parameter("container", str, "box", "1", "box (lateral boundaries set by lateral) or cylinder (a vertical "
               "cylinder of container_radius about (container_radius, container_radius), its wall frictionless or "
               "glued as wall_contact says)", choices=CONTAINERS),
     Parameter("box_length", float, 50.0, LENGTH_UNITS, "side of the square bottom [0, box_length]^2 "
-              "(periodic or walled)", low=0.0, low_inclusive=False, read_when=_BOXED),
+              "(periodic or walled)", low=0.0, low_inclusive=False, high=LARGEST_QUANTITY, read_when=_BOXED),
     Parameter("lateral", str, "periodic", "1", "lateral boundaries of the box: periodic, walls (four rigid vertical "
               "walls, see wall_contact), none (a heap on an unbounded floor)", choices=tuple(LATERAL),
               read_when=_IN_BOX),
     Parameter("container_radius", float, 10.0, LENGTH_UNITS, "radius of the cylinder", low=0.0,
-              low_inclusive=False, read_when=_CYLINDER),
+              low_inclusive=False, high=LARGEST_QUANTITY, read_when=_CYLINDER),
     Parameter("container_sides", int, 0, "1", "the cylinder's wall is the regular polygon of this many flat sides "
               "inscribed in its circle (the exact motions of the method exist for flat walls only); 0: the fewest "
               "sides with which it departs from the circle by at most 1 % of the smallest sphere radius",
-              low=0, read_when=_CYLINDER),
+              low=0, high=MAX_CONTAINER_SIDES, read_when=_CYLINDER),
     Parameter("substrate", str, "", "1", "fixed spheres the particles are deposited onto: CSV (x, y, z, r) or HDF5 "
               "(spheres/position, spheres/radius, e.g. a deposition task file, whose own substrate is included); "
               "\"\": the bare floor", is_file=True),
@@ -188,11 +205,13 @@ PARAMETERS = (
     Parameter("floor", str, "stop", "1", "floor z = 0: stop (the paper: a particle touching it is immobilised) "
               "or roll (the floor contact acts as a pivot and the particle keeps rolling)", choices=tuple(FLOOR)),
     Parameter("drop_radius", float, 5.0, LENGTH_UNITS, "with lateral = none: particles are released uniformly "
-              "over the disc of this radius around the origin", low=0.0, low_inclusive=False, read_when=_HEAP),
+              "over the disc of this radius around the origin", low=0.0, low_inclusive=False, high=LARGEST_QUANTITY,
+              read_when=_HEAP),
     Parameter("size_distribution", str, "monodisperse", "1", "particle size factor: monodisperse (1), uniform "
               "(in [1 - size_spread, 1 + size_spread]), lognormal (exp(size_spread Z), Z standard normal) or sieve "
               "(the volume-equivalent diameter drawn from the sieve curve sieve_curve)", choices=SIZE_DISTRIBUTIONS),
-    Parameter("size_spread", float, 0.1, "1", "width of the size distribution", low=0.0, read_when=_SPREAD),
+    Parameter("size_spread", float, 0.1, "1", "width of the size distribution", low=0.0, high=MAX_SIZE_SPREAD,
+              read_when=_SPREAD),
     Parameter("sieve_curve", str, "", "1", "CSV file of the sieve curve: sieve size (a length), cumulative percent "
               "passing; interpolated linearly in log size", is_file=True, read_when=_SIEVE),
     Parameter("sieve_basis", str, "mass", "1", "what the sieve curve's percentages count: mass (a grading curve) "
@@ -202,13 +221,15 @@ PARAMETERS = (
     Parameter("trial_angle", float, 1e-2, "rad", "trial rotation Delta phi of frustrated situations (section 4.1)",
               low=0.0, high=np.pi, low_inclusive=False, high_inclusive=False),
     Parameter("cycle_n", int, 4, "1", "n of the cycling criterion (34), section 4.2 (0: off)", low=0, high=28),
-    Parameter("cycle_eps", float, 1e-3, "1", "epsilon of the cycling criterion (34)", low=0.0, low_inclusive=False),
+    Parameter("cycle_eps", float, 1e-3, "1", "epsilon of the cycling criterion (34)", low=0.0, low_inclusive=False,
+              high=1.0),
     Parameter("max_events_per_particle", int, 100_000, "1", "a particle needing more events stops the task "
               "with an error naming it", low=1),
     Parameter("profile_bins", int, 50, "1", "number of slabs of the packing profile over 0 <= z <= 1.25 h",
-              low=1, sweepable=False),
+              low=1, high=MAX_PROFILE_BINS, sweepable=False),
     Parameter("packing_samples", int, 200_000, "1", "quasi-Monte Carlo points per slab for the overlaps of "
-              "spheres within a particle (sphere volumes are exact; measured error below 1e-4)", low=1000),
+              "spheres within a particle (sphere volumes are exact; measured error below 1e-4)", low=1000,
+              high=MAX_PACKING_SAMPLES),
     Parameter("timing_skip_fraction", float, 0.5, "1", "fraction of the particles, deposited first, left out "
               "of spheres_per_second (section 5: the first half)", low=0.0, high=1.0, high_inclusive=False),
     *statistics.PARAMETERS,
@@ -221,7 +242,7 @@ SPECIES_TABLE = TableArray(
     "(any of " + ", ".join(SPECIES_KEYS) + "; the others are the job's) and its share",
     (Parameter("name", str, REQUIRED, "1", "the species' name (the dataset's species coordinate)"),
      Parameter("share", float, 1.0, "1", "share of the mixture, by share_basis; shares are normalised", low=0.0,
-               low_inclusive=False),
+               low_inclusive=False, high=MAX_SHARE),
      *(p for p in PARAMETERS if p.name in SPECIES_KEYS)),
     required=("name",))
 LAYERS_TABLE = TableArray(
@@ -232,36 +253,125 @@ LAYERS_TABLE = TableArray(
     required=("n_particles",))
 
 def check(params: dict) -> None:
-    """The checks across keys of one point: species, layers, sieve curves, substrate, and that a particle fits."""
+    """The checks across keys of one point: species, layers, sieve curves, that a particle fits in
+    the container, the substrate, and the memory of the sediment grid (which needs the particles)."""
     check_species(params)
     species = species_of(params)
-    extent = max(s.extent * s.largest_scale() for s in species)
+    sizes = _Sizes.of(species)
     if params["container"] == "cylinder":
-        radius = params["container_radius"]
-        inscribed = radius * math.cos(math.pi / container_sides(params, species))
-        if not inscribed > extent:
-            raise JobError(f"container_radius = {radius} must exceed the largest particle extent {extent:.6g} "
-                           f"(and the polygon's inscribed radius {inscribed:.6g} too), so that a particle fits in "
-                           f"the cylinder; allowed: container_radius > {extent / inscribed * radius:.6g}")
-        if 0 < params["container_sides"] < sdbd.MIN_CYLINDER_SIDES:
-            raise JobError(f"container_sides = {params['container_sides']}: allowed: 0 (automatic) or at least "
-                           f"{sdbd.MIN_CYLINDER_SIDES}")
-    elif params["lateral"] != "none" and not params["box_length"] > 2.0 * extent:
+        _check_cylinder(params, species, sizes)
+    elif params["lateral"] != "none":
+        _check_box(params, sizes)
+    else:
+        _check_heap(params, sizes)
+    substrate = substrate_spheres(params)
+    _check_container(params, _container(params, species), sizes, substrate)
+    _check_grid_memory(params, species, substrate)
+
+
+@dataclass(frozen=True)
+class _Sizes:
+    """The sizes of a point's particles that the container must hold, over every species and size factor."""
+
+    extent: float  # the farthest sphere surface from a centre of mass, at the largest size factor
+    largest_radius: float  # the largest sphere, at the largest size factor
+    length_scale: float  # the mean sphere radius of the templates at scale 1: the kernel's tolerances
+    widest: str  # "2 x extent", and the size distribution that makes it, as a message shows it
+
+    @classmethod
+    def of(cls, species: tuple[Species, ...]) -> "_Sizes":
+        widest = max(species, key=lambda s: s.extent * s.largest_scale())
+        scale = widest.largest_scale()
+        named = f"species {widest.name!r}: " if len(species) > 1 else ""
+        spread = (f"; {named}size_distribution = {widest.params['size_distribution']!r} gives size factors up to "
+                  f"{scale:.4g}" if scale != 1.0 else "")
+        return cls(extent=widest.extent * scale,
+                   largest_radius=max(float(s.radii.max()) * s.largest_scale() for s in species),
+                   length_scale=float(np.concatenate([s.radii for s in species]).mean()),
+                   widest=f"2 x {widest.extent * scale:.6g}{spread}")
+
+
+def _check_box(params: dict, sizes: _Sizes) -> None:
+    if not params["box_length"] > 2.0 * sizes.extent:
         raise JobError(f"box_length = {params['box_length']} must exceed twice the particle extent "
-                       f"(2 x {extent:.6g}), so that a particle fits in the box; allowed: box_length > "
-                       f"{2 * extent:.6g}")
-    if params["substrate"]:
-        substrate_spheres(params)  # reads and checks the file
+                       f"({sizes.widest}), so that a particle fits in the box; allowed: box_length > "
+                       f"{2 * sizes.extent:.6g}")
+
+
+def _check_cylinder(params: dict, species: tuple[Species, ...], sizes: _Sizes) -> None:
+    if 0 < params["container_sides"] < sdbd.MIN_CYLINDER_SIDES:
+        raise JobError(f"container_sides = {params['container_sides']}: allowed: 0 (automatic) or at least "
+                       f"{sdbd.MIN_CYLINDER_SIDES}")
+    radius = params["container_radius"]
+    sides = container_sides(params, species)
+    if sides > MAX_CONTAINER_SIDES:
+        raise JobError(f"container_radius = {radius}: the automatic container_sides would be {sides} (the polygon "
+                       f"departs from the circle by at most {CYLINDER_FLATNESS} of the smallest sphere radius "
+                       f"{smallest_sphere_radius(species):.4g}); allowed: at most {MAX_CONTAINER_SIDES} sides: "
+                       "a smaller container_radius, or container_sides")
+    inscribed = radius * math.cos(math.pi / sides)
+    if not inscribed > sizes.extent:
+        raise JobError(f"container_radius = {radius} must exceed the largest particle extent {sizes.extent:.6g} "
+                       f"(and the polygon's inscribed radius {inscribed:.6g} too), so that a particle fits in "
+                       f"the cylinder; allowed: container_radius > {sizes.extent / inscribed * radius:.6g}")
+
+
+def _check_heap(params: dict, sizes: _Sizes) -> None:
+    if params["drop_radius"] > MAX_HEAP_EXTENTS * sizes.extent:
+        raise JobError(f"drop_radius = {params['drop_radius']!r}: allowed: at most {MAX_HEAP_EXTENTS:g} particle "
+                       f"extents ({MAX_HEAP_EXTENTS * sizes.extent:.6g}); particles dropped farther apart form no heap")
+
+
+def _check_container(params: dict, geometry: "_Geometry", sizes: _Sizes, substrate) -> None:
+    """What the deposition kernel would refuse: a periodic box narrower than four sphere radii, walls
+    narrower than a sphere, a substrate sphere below the floor or through a wall."""
+    try:
+        sdbd.check_container(geometry.lower, geometry.upper, geometry.lateral, sizes.largest_radius, sizes.extent,
+                             sizes.length_scale, container=geometry.container, cylinder=geometry.cylinder,
+                             substrate_positions=substrate[0], substrate_radii=substrate[1])
+    except ValueError as error:
+        if "substrate sphere" in str(error):
+            raise JobError(f"substrate = {params['substrate']!r}: {error} (spheres count from 0, in the order of "
+                           "the file)") from None
+        raise JobError(f"{_container_size_key(params)} = {params[_container_size_key(params)]!r}: {error}") from None
+
+
+def _check_grid_memory(params: dict, species: tuple[Species, ...], substrate) -> None:
+    """Refuse a container whose sediment grid, with the rest of the task, needs more than this machine's memory.
+
+    The grid has a column per cell of the box, the cell being the first particle's largest sphere
+    diameter (or the substrate's largest); the smallest that can be is taken.  A heap's columns
+    are made where particles land."""
+    if params["container"] == "box" and params["lateral"] == "none":
+        return
+    size = _container_size_key(params)
+    width = 2.0 * params[size] if size == "container_radius" else params[size]
+    cell = 2.0 * max(min(float(s.radii.max()) * s.smallest_scale() for s in species),
+                     float(substrate[1].max(initial=0.0)))
+    columns = math.floor(width / cell) ** 2
+    need = memory(params) + BYTES_PER_GRID_COLUMN * columns + BYTES_PER_SEDIMENT_SPHERE * len(substrate[1])
+    keys = ", ".join(f"{key}={params[key]!r}" for key in (size, *memory_keys(params)))
+    check_memory(need, "one task", f"{keys}, and a grid cell of {cell:.4g}, the smallest the first particle's "
+                 "largest sphere diameter can be")
+
+
+def _container_size_key(params: dict) -> str:
+    return "container_radius" if params["container"] == "cylinder" else "box_length"
 
 
 def container_sides(params: dict, species: tuple[Species, ...]) -> int:
-    """Sides of the cylinder's polygon: ``container_sides``, or the fewest with which the polygon
-    departs from the circle, R (1 - cos(pi / n)), by at most CYLINDER_FLATNESS of the smallest sphere radius."""
+    """Sides of the cylinder's polygon: ``container_sides``, or the fewest with which the polygon departs
+    from the circle, R (1 - cos(pi / n)), by at most CYLINDER_FLATNESS of the smallest sphere radius
+    any particle can have (:func:`smallest_sphere_radius`)."""
     if params["container_sides"]:
         return params["container_sides"]
-    smallest = min(float(s.radii.min()) for s in species)
-    depth = CYLINDER_FLATNESS * smallest / params["container_radius"]
+    depth = CYLINDER_FLATNESS * smallest_sphere_radius(species) / params["container_radius"]
     return max(sdbd.MIN_CYLINDER_SIDES, math.ceil(math.pi / math.acos(1.0 - min(depth, 1.0))))
+
+
+def smallest_sphere_radius(species: tuple[Species, ...]) -> float:
+    """The smallest sphere radius of any particle: a species' smallest sphere at its smallest size factor."""
+    return min(float(s.radii.min()) * s.smallest_scale() for s in species)
 
 
 def substrate_spheres(params: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -290,22 +400,38 @@ def memory(params: dict) -> int:
       16 surface samples per sphere (points, normals, chords, cells, a heap);
     - ``BYTES_PER_CAP_POINT`` per quasi-Monte Carlo point of the overlap caps of the packing
       fraction: one cap's points are held at a time, at most ``MAX_POINTS_PER_CAP`` of them
-      (about 3 MiB).
+      (about 3 MiB);
+    - a mesh particle, while it is built: ``MESH_BUILD_BYTES`` and ``BYTES_PER_MESH_FILE_BYTE`` per
+      byte of its file (the triangles and their samples);
+    - the profiles and distributions of the statistics, 8 bytes per bin of each.
 
-    A mixture counts its largest species.  Measured peaks: 0.37 KiB per particle of one sphere,
-    95 B per sediment sphere of cubes (L = 3), 2.4 KiB per sphere of an ellipsoid of 8000 spheres,
-    48 B per cap point (rods of five overlapping spheres, tracemalloc).
+    A mixture counts its largest species, a mesh particle ``mesh_spheres`` spheres (at most that many
+    balls are kept); nothing is built here.  The sediment grid, which needs the built particles, is
+    checked with them (:func:`check`).  Measured peaks: 0.37 KiB per particle of one sphere, 95 B per
+    sediment sphere of cubes (L = 3), 2.4 KiB per sphere of an ellipsoid of 8000 spheres, 48 B per
+    cap point (rods of five overlapping spheres), 55 MiB for a mesh of 20 480 triangles in a binary
+    STL of 1 MiB and 66 MiB for 81 920 triangles in 4 MiB (tracemalloc).
     """
     spheres = _spheres_per_particle(params)
     build = BYTES_PER_SMOOTH_SHAPE_SPHERE * spheres if _shapes(params) & set(SMOOTH_SHAPES) else 0
     sediment = params["n_particles"] * (BYTES_PER_PARTICLE + BYTES_PER_SEDIMENT_SPHERE * spheres)
     cap_points = min(MAX_POINTS_PER_CAP, params["packing_samples"] * (params["profile_bins"] + 1))
-    return build + sediment + BYTES_PER_CAP_POINT * cap_points
+    species = len(params.get("species") or ((),))
+    bins = (species + 1) * params["profile_bins"] + params["rdf_bins"] + params["orientation_bins"]
+    return build + _mesh_build_bytes(params) + sediment + BYTES_PER_CAP_POINT * cap_points + 8 * bins
+
+
+def _mesh_build_bytes(params: dict) -> int:
+    """Memory of building the largest mesh particle of the point (0 without one)."""
+    files = [own["mesh_file"] for own in (species_parameters(params, entry) for entry in params.get("species") or ({},))
+             if own["shape"] == "mesh" and own["mesh_file"]]
+    return max((MESH_BUILD_BYTES + BYTES_PER_MESH_FILE_BYTE * os.path.getsize(path) for path in files), default=0)
 
 
 def memory_keys(params: dict) -> tuple[str, ...]:
     size = SIZE_KEYS.get(params["shape"])
-    return ("n_particles", "shape", size) if size else ("n_particles", "shape")
+    mesh = ("mesh_file",) if params["shape"] == "mesh" else ()
+    return ("n_particles", "shape", size, *mesh) if size else ("n_particles", "shape")
 
 
 def warm_up_parameters(params: dict) -> dict:
@@ -327,8 +453,10 @@ def _spheres_per_particle(params: dict) -> int:
 
 def _spheres_of(params: dict, entry: dict) -> int:
     shape, size = params["shape"], params["shape_size"]
-    if shape in ("agglomerate", "mesh"):
+    if shape == "agglomerate":
         return len(species_shape(params, entry)[1])
+    if shape == "mesh":
+        return params["mesh_spheres"]  # at most: the cover stops early when every sample is covered
     if shape in SMOOTH_SHAPES:
         return params["shape_spheres"]  # at most: medial balls that add nothing are dropped
     return {"sphere": 1, "rod": size, "four_rods": 4 * size - 3, "tripod": 3 * size - 2, "spiky": 3 * size - 2,

@@ -109,6 +109,7 @@ from parsim.core.sdbd.constants import (
 __all__ = [
     "deposit",
     "deposit_with_diagnostics",
+    "check_container",
     "DepositionResult",
     "EVENT_KINDS",
     "STATE_NAMES",
@@ -322,23 +323,9 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
         r_max = 1.0
         ext_max = 1.0
 
-    if lateral != LATERAL_NONE:
-        if lo.shape != (2,) or hi.shape != (2,) or not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)):
-            raise ValueError("box_lower_xy and box_upper_xy must be finite pairs (x, y)")
-        if np.any(hi <= lo):
-            raise ValueError("box_upper_xy must exceed box_lower_xy in x and y")
-    sub_pos, sub_rad = _substrate(substrate_positions, substrate_radii)
+    sub_pos, sub_rad, polygon, n_sides, lo, hi = _container(lo, hi, lateral, r_max, ext_max, container, cylinder,
+                                                            substrate_positions, substrate_radii, 1e-9 * ell)
     r_sub = float(np.max(sub_rad)) if len(sub_rad) else 0.0
-    polygon, n_sides, lo, hi = _cylinder(container, cylinder, lateral, lo, hi, max(r_max, r_sub))
-    if lateral == LATERAL_PERIODIC:
-        side = np.min(hi - lo)
-        r_contact = max(r_max, r_sub)
-        need = max(2.0 * ext_max, 4.0 * r_contact)
-        if side <= need:
-            raise ValueError(
-                f"periodic box side {side:g} must exceed twice the largest particle extent "
-                f"(2 x {ext_max:g}) and four times the largest sphere radius (4 x {r_contact:g}), "
-                f"i.e. {need:g}, so that minimum images are unambiguous")
     if lateral == LATERAL_WALLS and P:
         # the caller guarantees that each particle starts inside; check it
         matrix = np.empty((3, 3))
@@ -355,10 +342,6 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
                 outside = np.any(xy - r[:, None] < lo - tol) or np.any(xy + r[:, None] > hi + tol)
             if outside:
                 raise ValueError(f"particle {p}: dropped at {tuple(pxy[p])}, it does not fit inside the walls")
-        if np.any(hi - lo < 2.0 * r_max):
-            raise ValueError("walled box narrower than the largest sphere")
-    if lateral == LATERAL_WALLS:
-        _check_substrate_inside(sub_pos, sub_rad, lo, hi, polygon, n_sides, 1e-9 * ell)
     if lateral == LATERAL_NONE:
         lo = np.zeros(2)
         hi = np.zeros(2)
@@ -399,6 +382,46 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     ), {"max_overlap": float(diag[0]), "steps": int(diag[1]), "chunk_steps": int(diag[2]),
         "length_scale": ell, "trace": trace}
 
+
+
+def check_container(box_lower_xy, box_upper_xy, lateral, largest_radius, largest_extent, length_scale,
+                    container=CONTAINER_BOX, cylinder=None, substrate_positions=None, substrate_radii=None):
+    """Raise the ValueError :func:`deposit` would raise for this container and substrate, for particles
+    whose spheres have radii up to ``largest_radius`` and reach ``largest_extent`` from their centre
+    of mass, and whose mean sphere radius at scale 1 is ``length_scale``: for checking a task before
+    it runs."""
+    lo = np.asarray(box_lower_xy, dtype=np.float64)
+    hi = np.asarray(box_upper_xy, dtype=np.float64)
+    _container(lo, hi, lateral, float(largest_radius), float(largest_extent), container, cylinder,
+               substrate_positions, substrate_radii, 1e-9 * length_scale)
+
+
+def _container(lo, hi, lateral, r_max, ext_max, container, cylinder, substrate_positions, substrate_radii, tol):
+    """The substrate (centres, radii), the cylinder's polygon and sides (None, 0 for the box) and the
+    lateral box, validated: a box of positive size, a periodic side wider than twice the largest
+    extent and four times the largest sphere radius (minimum images unambiguous), walls that hold
+    the largest sphere, a substrate inside the walls."""
+    if lateral != LATERAL_NONE:
+        if lo.shape != (2,) or hi.shape != (2,) or not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)):
+            raise ValueError("box_lower_xy and box_upper_xy must be finite pairs (x, y)")
+        if np.any(hi <= lo):
+            raise ValueError("box_upper_xy must exceed box_lower_xy in x and y")
+    sub_pos, sub_rad = _substrate(substrate_positions, substrate_radii)
+    r_contact = max(r_max, float(np.max(sub_rad)) if len(sub_rad) else 0.0)
+    polygon, n_sides, lo, hi = _cylinder(container, cylinder, lateral, lo, hi, r_contact)
+    if lateral == LATERAL_PERIODIC:
+        side = np.min(hi - lo)
+        need = max(2.0 * ext_max, 4.0 * r_contact)
+        if side <= need:
+            raise ValueError(
+                f"periodic box side {side:g} must exceed twice the largest particle extent "
+                f"(2 x {ext_max:g}) and four times the largest sphere radius (4 x {r_contact:g}), "
+                f"i.e. {need:g}, so that minimum images are unambiguous")
+    if lateral == LATERAL_WALLS:
+        if np.any(hi - lo < 2.0 * r_max):
+            raise ValueError("walled box narrower than the largest sphere")
+        _check_substrate_inside(sub_pos, sub_rad, lo, hi, polygon, n_sides, tol)
+    return sub_pos, sub_rad, polygon, n_sides, lo, hi
 
 
 def _substrate(substrate_positions, substrate_radii):

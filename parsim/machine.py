@@ -1,0 +1,28 @@
+"""What this machine offers a task: its physical memory, and the check of an estimate against it."""
+
+import os
+
+from parsim.errors import JobError
+
+BINARY_UNITS = ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB", "ZiB", "YiB")
+
+
+def physical_memory() -> int:
+    """This machine's physical memory in bytes."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def in_binary_units(n_bytes: int) -> str:
+    """``n_bytes`` to three digits in the largest binary unit it reaches, e.g. '23.4 GiB'."""
+    n_bytes = int(n_bytes)
+    exponent = min(max(n_bytes.bit_length() - 1, 0) // 10, len(BINARY_UNITS) - 1)
+    return f"{n_bytes / 1024**exponent:.3g} {BINARY_UNITS[exponent]}"
+
+
+def check_memory(need: float, what: str, estimated_from: str) -> None:
+    """Refuse ``what`` ("one task", "the dataset") if it needs more than this machine's memory:
+    a one-line :class:`JobError` naming the estimate and the keys it grows with (``estimated_from``)."""
+    total = physical_memory()
+    if need > total:
+        raise JobError(f"{what} needs about {in_binary_units(need)} of memory (estimated from {estimated_from}), "
+                       f"more than this machine's {in_binary_units(total)}")
