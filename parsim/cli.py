@@ -19,21 +19,58 @@ Errors a user can cause are printed as one line, without a traceback: exit
 status 2 for a job that cannot run as written (checked before anything is
 computed), 1 for a failure while it runs (a task, a full disk).  Under
 mpiexec, rank 0 prints the line and every rank ends; an unexpected failure on
-one rank alone aborts the whole job.
+one rank alone aborts the whole job.  Ctrl-C before a run's tasks start (or in
+any other command) is one line and status 130; a reader of the output that has
+gone (``parsim info OUT | head -1``) ends the command quietly with status 141,
+as SIGPIPE ends ``cat``.
 """
 
 import argparse
+import os
+import re
 import signal
 import sys
 from pathlib import Path
 
 import parsim
 from parsim.errors import EXIT_RUN_FAILED, EXIT_UNFINISHED, EXIT_USER_ERROR, ParsimError, exit_status
-from parsim.output.export import add_export_command, run_export
+
+#: Exit status after Ctrl-C, as the shell gives a process that SIGINT ended.
+EXIT_INTERRUPTED = 128 + signal.SIGINT
+#: Exit status when the reader of standard output has gone, as the shell gives a process that SIGPIPE ended.
+EXIT_READER_GONE = 128 + signal.SIGPIPE
+DURATION = re.compile(r"(?:(?P<days>\d+)-)?(?P<hours>\d+):(?P<minutes>\d\d):(?P<seconds>\d\d)")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line, as parsim's other errors."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USER_ERROR, f"parsim: error: {message} (see {self.prog} --help)\n")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="parsim", description="Particle piles and clusters, run as MPI ensembles.")
+    """The command line; heavy modules are imported only here, so that a Ctrl-C while they load is
+    one line too (the launcher's rank 0 alone prints it under mpiexec)."""
+    from parsim.parallel.launcher import speaks_for_all  # nothing but os: no MPI yet
+
+    try:
+        args = _parser().parse_args(argv)
+        status = _command(args)
+        sys.stdout.flush()  # a reader that has gone is met here, not when the interpreter exits
+        return status
+    except KeyboardInterrupt:
+        if speaks_for_all():
+            print("\nparsim: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        return _reader_gone()
+
+
+def _parser() -> argparse.ArgumentParser:
+    from parsim.output.export import add_export_command
+
+    parser = _Parser(prog="parsim", description="Particle piles and clusters, run as MPI ensembles.")
     parser.add_argument("--version", action="version", version=f"parsim {parsim.__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -75,10 +112,15 @@ def main(argv: list[str] | None = None) -> int:
                          help="the netCDF file to write (default: OUTPUT/NAME.partial.nc)")
 
     add_export_command(commands)
+    return parser
 
-    args = parser.parse_args(argv)
+
+def _command(args) -> int:
+    """Run the command ``args`` names; a ParsimError of any command but ``run`` is one line, status 2."""
     if args.command == "run":
         return _run(args)
+    from parsim.output.export import run_export
+
     try:
         return {"validate": _validate, "info": _info, "plot": _plot, "collect": _collect,
                 "export": run_export}[args.command](args)
@@ -87,71 +129,89 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USER_ERROR
 
 
+def _reader_gone() -> int:
+    """End quietly, as ``cat`` does when the reader of its output has gone (``parsim info OUT | head -1``):
+    what is still buffered goes nowhere, instead of failing again when the interpreter exits."""
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError):  # no file descriptor behind sys.stdout: nothing buffered to lose
+        pass
+    return EXIT_READER_GONE
+
+
 def _duration(text: str) -> float:
     """Seconds of a batch-system time, [D-]HH:MM:SS (Slurm's form), for --time-limit."""
-    days, _, clock = text.rpartition("-")
-    parts = clock.split(":")
-    try:
-        if len(parts) != 3 or (days and int(days) < 0):
-            raise ValueError
-        hours, minutes, seconds = (int(part) for part in parts)
-        if hours < 0 or not 0 <= minutes < 60 or not 0 <= seconds < 60:
-            raise ValueError
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: allowed: HH:MM:SS or D-HH:MM:SS, e.g. 23:50:00") from None
-    return ((int(days or 0) * 24 + hours) * 60 + minutes) * 60.0 + seconds
+    match = DURATION.fullmatch(text)
+    if match is None or int(match["minutes"]) >= 60 or int(match["seconds"]) >= 60:
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed: HH:MM:SS or D-HH:MM:SS, e.g. 23:50:00")
+    days, hours, minutes, seconds = (int(match[part] or 0) for part in ("days", "hours", "minutes", "seconds"))
+    return ((days * 24 + hours) * 60 + minutes) * 60.0 + seconds
 
 
 def _run(args) -> int:
     """``parsim run`` on every rank: rank 0 reads the job and hands it out, then all ranks run it.
 
-    A ParsimError of rank 0's phases reaches every rank alike, so rank 0 prints
-    it and all ranks return its status.  Any other exception, and a ParsimError
-    of one rank alone, is printed by its rank, which aborts the job.
+    MPI is initialised once the launcher is known to match the MPI library
+    (:func:`~parsim.parallel.launcher.start_mpi`).  A ParsimError of rank 0's phases reaches every
+    rank alike, so rank 0 prints it and all ranks return its status.  Any other exception, and a
+    ParsimError of one rank alone, is printed by its rank, which aborts the job; on a single rank
+    a ParsimError is one line and any other exception is raised (a bug: its traceback).
     """
-    from mpi4py import MPI
+    from parsim.parallel.launcher import speaks_for_all, start_mpi
 
-    from parsim.job import load_job
-    from parsim.parallel.collective import FailedOnRoot, abort_if_alone, on_root
-    from parsim.parallel.launcher import launcher_mismatch, speaks_for_all
-    from parsim.runner import run_job
-    from parsim.solvers import SOLVERS
+    try:
+        MPI = start_mpi()
+    except ParsimError as error:  # the launcher and the library do not belong together: nothing is done
+        if speaks_for_all():
+            print(f"parsim: error: {error}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        return _interrupted_before_tasks()
+    from parsim.parallel.collective import FailedOnRoot, abort_if_alone
 
     comm = MPI.COMM_WORLD
-    mismatch = launcher_mismatch(comm.Get_size())
-    if mismatch:  # every process would run the whole job into the same folder
-        if speaks_for_all():
-            print(f"parsim: error: {mismatch}", file=sys.stderr)
-        return EXIT_USER_ERROR
     try:
-        job = on_root(comm, lambda: load_job(args.job, SOLVERS, output=args.output))
-        path, complete = run_job(job, comm, progress=not args.quiet, ranks_per_task=args.ranks_per_task,
-                                 time_limit=args.time_limit)
+        path, complete = _run_job(args, comm)
     except FailedOnRoot:
         return EXIT_RUN_FAILED  # rank 0 has printed its traceback
     except KeyboardInterrupt:  # before the run's own handler is in place (reading the job)
-        if comm.Get_rank() == 0:
-            print("\nparsim: interrupted before any task started", file=sys.stderr)
-        return 128 + signal.SIGINT
+        return _interrupted_before_tasks()
     except ParsimError as error:
         abort_if_alone(comm, error)  # e.g. a file that this rank alone cannot read
         if comm.Get_rank() == 0:
             print(f"parsim: error: {error}", file=sys.stderr)
         return exit_status(error)
     except Exception as error:  # noqa: BLE001 - one rank's failure must not leave the others waiting
-        if comm.Get_size() == 1:
-            raise
-        abort_if_alone(comm, error)
+        abort_if_alone(comm, error)  # ends every rank; returns on a single rank, where the traceback says it
+        raise
+    if comm.Get_rank() > 0:
+        return 0 if complete else EXIT_UNFINISHED
     if complete:
-        if comm.Get_rank() == 0:
-            print(f"dataset: {path}")
+        print(f"dataset: {path}")
         return 0
-    if comm.Get_rank() == 0:
-        kept = f"partial dataset: {path}" if path else "no task has finished"
-        print(f"parsim: --time-limit reached with tasks left ({kept}); run the same command to continue",
-              file=sys.stderr)
+    kept = f"partial dataset: {path}" if path else "no task has finished"
+    print(f"parsim: --time-limit reached with tasks left ({kept}); run the same command to continue", file=sys.stderr)
     return EXIT_UNFINISHED
-    return 0
+
+
+def _run_job(args, comm) -> tuple[Path | None, bool]:
+    """Read the job on rank 0 and run it on every rank of ``comm`` (:func:`parsim.runner.run_job`)."""
+    from parsim.job import load_job
+    from parsim.parallel.collective import on_root
+    from parsim.runner import run_job
+    from parsim.solvers import SOLVERS
+
+    job = on_root(comm, lambda: load_job(args.job, SOLVERS, output=args.output))
+    return run_job(job, comm, progress=not args.quiet, ranks_per_task=args.ranks_per_task,
+                   time_limit=args.time_limit)
+
+
+def _interrupted_before_tasks() -> int:
+    from parsim.parallel.launcher import speaks_for_all
+
+    if speaks_for_all():
+        print("\nparsim: interrupted before any task started", file=sys.stderr)
+    return EXIT_INTERRUPTED
 
 
 def _validate(args) -> int:

@@ -5,6 +5,8 @@ once into a fresh folder, variable by variable; a point draws the same numbers w
 the sweep holds and in whatever order the keys are written.
 """
 
+import shutil
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -44,12 +46,12 @@ n_spheres = [40, 60]
 """
 
 
-def run_into(tmp_path, name: str, text: str, out: str) -> xr.Dataset:
+def run_into(tmp_path, name: str, text: str, out: str, job_name: str = "growing") -> xr.Dataset:
     job = tmp_path / f"{name}.toml"
     job.write_text(text)
     result = run_serial("run", str(job), "--output", str(tmp_path / out), "--quiet")
     assert result.returncode == 0, result.stderr
-    return reproducible_part(tmp_path / out / "growing.nc")
+    return reproducible_part(tmp_path / out / f"{job_name}.nc")
 
 
 def rows_per_file(folder, text: str) -> list[int]:
@@ -195,3 +197,45 @@ substrate = ["{floors[0]}", "{floors[1]}"]
     floors[1].unlink()  # the second sediment is done: its floor file may go
     shrunk = run_into(tmp_path, "shrunk", job.replace(f', "{floors[1]}"', ""), "out")
     xr.testing.assert_identical(shrunk.filling_height, both.filling_height.isel(substrate=[0]))
+
+
+RENAMED = """
+name = "renamed"
+kind = "deposition"
+seed = 3
+realizations = 2
+[parameters]
+n_particles = 5
+box_length = 20.0
+packing_samples = 1000
+{fixed}
+[sweep]
+trial_angle = [0.01, 0.02]
+{species}
+"""
+FILE_KEYS = {  # where the job names the file, and the key a changed content is refused by
+    "[parameters] agglomerate_file": ('shape = "agglomerate"\nagglomerate_file = "{path}"', ""),
+    "[[species]]": ("", '[[species]]\nname = "flakes"\nshape = "agglomerate"\nagglomerate_file = "{path}"'),
+}
+
+
+@pytest.mark.parametrize("key", FILE_KEYS)
+def test_an_input_file_under_another_name_keeps_its_tasks(tmp_path, key):
+    first, copy = tmp_path / "flake.csv", tmp_path / "flake copy.csv"
+    first.write_text("x,y,z,r\n0,0,0,1\n1.5,0,0,1\n")
+    shutil.copy(first, copy)
+    fixed, species = FILE_KEYS[key]
+
+    def job(path) -> str:
+        return RENAMED.format(fixed=fixed.format(path=path), species=species.format(path=path))
+
+    computed = run_into(tmp_path, "first", job(first), "out", job_name="renamed")
+    first.unlink()  # only the copy is left
+    again = run_into(tmp_path, "again", job(copy), "out", job_name="renamed")
+    assert sum(rows_per_file(tmp_path / "out" / "rows", job(copy))) == 4  # nothing computed again
+    for name in computed.data_vars:  # the dataset names the file as the job does now
+        xr.testing.assert_equal(again[name].reset_coords(drop=True), computed[name].reset_coords(drop=True))
+    copy.write_text("x,y,z,r\n0,0,0,1\n1.8,0,0,1\n")  # another content under the name is another input
+    (tmp_path / "changed.toml").write_text(job(copy))
+    refused = run_serial("validate", str(tmp_path / "changed.toml"), "--output", str(tmp_path / "out"))
+    assert refused.returncode == 2 and f"{key} (" in refused.stderr and "flake copy.csv" in refused.stderr

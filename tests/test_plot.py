@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import h5py
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ import xarray as xr
 from parsim.cli import main
 from parsim.errors import PlotError
 from parsim.job import parse_job
+from parsim.output.collect import write_partial_dataset
 from parsim.output.dataset import all_statistics, build_dataset, row_layout, write_dataset
 from parsim.output.folder import OutputFolder
 from parsim.output.snapshot import write_task_file
@@ -263,3 +265,57 @@ def test_wall_time_exponent_and_ensemble_statistics():
 def test_running_a_job_does_not_import_matplotlib():
     code = "import sys, parsim.cli, parsim.runner; sys.exit('matplotlib' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+def write_partial(root, job_text, finished) -> Path:
+    """The output folder of ``job_text`` where only the tasks ``finished(parameters, task)`` chooses have
+    finished, and its partial dataset as parsim collect writes it; the dataset's path."""
+    job = parse_job(job_text, SOLVERS, output=root)
+    folder = OutputFolder(root, job.name)
+    folder.prepare(job, None)
+    done = np.array([finished(job.point_parameters(task.point), task) for task in job.tasks()])
+    rows = row_layout(job, job.solver).rows([(task, statistics(job, task))
+                                             for task, kept in zip(job.tasks(), done) if kept])
+    return write_partial_dataset(folder, job, rows, done)[0]
+
+
+@pytest.mark.parametrize("finished, skipped", [
+    # no task of the larger clusters has finished: their panels of box counting would be empty
+    (lambda parameters, task: parameters["n_spheres"] == 100, []),
+    # no task of time stepping: nothing to compare event-driven runs with
+    (lambda parameters, task: parameters["method"] == "ed",
+     ["skipped fractal_error: the finished tasks lack a dimension 'method' holding 'ed' and 'ts'"]),
+    # a single task
+    (lambda parameters, task: task.point == 0 and task.realization == 0,
+     ["skipped fractal_error: the finished tasks lack a dimension 'method' holding 'ed' and 'ts'"]),
+], ids=["smallest clusters", "event driven", "one task"])
+def test_a_partial_dataset_draws_what_its_finished_tasks_give(tmp_path, capsys, finished, skipped):
+    partial = write_partial(tmp_path / "out", AGGREGATION_JOB, finished)
+    assert main(["plot", str(partial)]) == 0
+    captured = capsys.readouterr()
+    said = [line for line in captured.out.splitlines() if line.startswith("skipped") and "cluster" not in line]
+    assert [line.split(" (")[0] for line in said] == skipped and captured.err == ""
+    drawn = {path.stem for path in (tmp_path / "out" / "figures").glob("*.png")}
+    assert drawn == set(FIGURES_BY_KIND["aggregation"]) - {"cluster"} - {line.split()[1][:-1] for line in said}
+
+
+@pytest.mark.parametrize("content", [
+    b"sieve size, passing\n1.0, 0\n",       # a text file
+    PNG_SIGNATURE + b"\x00\x00\x00\rIHDR",  # an image
+    b"",                                    # an empty file
+    "hdf5",                                 # an HDF5 file that is not a dataset of a job
+    "task",                                 # a task file
+], ids=["text", "png", "empty", "hdf5", "task file"])
+def test_plot_of_a_file_that_is_no_dataset_is_one_line(deposition_output, tmp_path, capsys, content):
+    path = tmp_path / "given.nc"
+    if content == "hdf5":
+        with h5py.File(path, "w") as file:
+            file["values"] = np.arange(3.0)
+    elif content == "task":
+        path = sorted((deposition_output / "tasks").glob("*.h5"))[0]
+    else:
+        path.write_bytes(content)
+    assert main(["plot", str(path)]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"parsim: error: cannot read {path} as a netCDF dataset: ") or line.startswith(
+        f"parsim: error: {path} is not the dataset of a parsim job (it has no attribute job_kind)"), line

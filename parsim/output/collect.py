@@ -21,6 +21,8 @@ from parsim.output.folder import OutputFolder, open_output
 from parsim.solver import flag_attributes
 
 PARTIAL_SUFFIX = ".partial.nc"
+#: The variable of a partial dataset that says which tasks it holds.
+COMPLETED = "completed"
 COMPLETED_MEANINGS = ("unfinished", "finished")
 
 
@@ -38,7 +40,7 @@ def write_partial_dataset(folder: OutputFolder, job: Job, rows: np.ndarray, fini
     if not finished.any():
         raise JobError(f"output folder {folder.root}: no task of job '{job.name}' has finished yet; nothing to collect")
     dataset = build_dataset(job, job.solver, rows, mpi_size=1, ranks_per_task=1, partial=True)
-    dataset["completed"] = xr.Variable(
+    dataset[COMPLETED] = xr.Variable(
         (*job.sweep, "realization"), finished.astype(np.int8).reshape(*job.sweep_shape, job.realizations),
         {"long_name": "whether the task had finished when the dataset was collected", "units": "1",
          **flag_attributes(COMPLETED_MEANINGS)})

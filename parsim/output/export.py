@@ -27,7 +27,6 @@ docs/export.md for the commands that load each file.
 
 import argparse
 import io
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -348,17 +347,15 @@ FORMATS: dict[str, Format] = {
 
 def _job_folder(output: Path) -> tuple[str, list[Path]]:
     """The job name and task files of the output folder ``output``; any other folder is an error."""
-    from parsim.output.folder import JOB_COPY, TASKS, task_files
+    from parsim.output.folder import TASKS, open_output
 
-    if not (output / JOB_COPY).is_file():
-        raise JobError(f"{output} is not a parsim output folder (no {JOB_COPY} in it); "
-                       "give the folder a job wrote, its key 'output' or the --output of parsim run")
-    files = task_files(output)
+    folder, job = open_output(output)
+    files = folder.existing_task_files(job)
     if not files:
         raise JobError(f"{output / TASKS} holds no task file yet: a task's file is written when it finishes, if "
                        f"the job keeps its configuration (key configurations; parsim info {output} says how far "
                        "the job got)")
-    return tomllib.loads((output / JOB_COPY).read_text()).get("name", output.name), files
+    return job.name, files
 
 
 def export_output(output: Path, format: str, task: str | None = None, all_tasks: bool = False,

@@ -17,12 +17,16 @@ to or removed from the sweep, a key moved between ``[parameters]`` and ``[sweep]
 ``configurations``.  Tasks are found by their point's values (:class:`~parsim.job.Task`), so
 only the new ones are computed, and the dataset shows the job as written now; rows and files of
 tasks it no longer has stay.  Another name, kind, seed, unit, array of tables or fixed parameter
-value, or an input file whose content changed, is refused naming the key.  A folder whose files
+value, or an input file whose content changed, is refused naming the key; input files are
+compared by content, so a file named anew keeps its tasks.  The folder's own commands (``info``,
+``collect``, ``plot``, ``export``) read the job copy with the hashes of :data:`INPUTS`, never the
+input files, so they work from any working directory and after an input file was edited or removed.  A folder whose files
 record another output schema (:data:`~parsim.output.snapshot.OUTPUT_SCHEMA`) is refused, with
 one line saying so.
 """
 
 import json
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +55,11 @@ class OutputFolder:
 
     def task_path(self, task: Task) -> Path:
         return self.tasks / f"{task.label}.h5"
+
+    def existing_task_files(self, job: Job) -> list[Path]:
+        """The task files of ``job`` in the folder, in the job's order: those of tasks the job no longer
+        has (a shrunk job) and those of tasks that keep none are left out."""
+        return [path for path in map(self.task_path, job.tasks()) if path.exists()]
 
     def finished(self, job: Job) -> tuple[np.ndarray, np.ndarray]:
         """The rows of every finished task in the folder (:func:`parsim.output.rows.read_rows`), of this
@@ -108,16 +117,43 @@ class OutputFolder:
 
     def stored_job(self) -> Job | None:
         """The job of the folder's copy (None if there is none), read without its input files, which
-        may be gone (:attr:`inputs` keeps their hashes)."""
+        may be gone or changed: its :attr:`~parsim.job.Job.input_hashes` are those :attr:`inputs`
+        records, so its tasks are the tasks computed here, from any working directory."""
         from parsim.solvers import SOLVERS  # here: the solvers import numba, which a folder alone does not need
 
         if not self.job_copy.exists():
             return None
         try:
-            return parse_job(self.job_copy.read_text(), SOLVERS, source=str(self.job_copy), verify=False)
+            job = parse_job(self._job_copy_text(), SOLVERS, source=str(self.job_copy), output=self.root,
+                            verify=False)
         except JobError as error:
-            raise JobError(f"output folder {self.root} holds a job file that is no longer valid ({error}); "
-                           f"give another output folder or remove {self.root}") from None
+            raise JobError(f"output folder {self.root} holds a job copy that cannot be used ({error}); copy the "
+                           f"job file last run into it as {JOB_COPY}, or give another output folder") from None
+        return replace(job, input_hashes=self._inputs_named_by(job, self._recorded_inputs()))
+
+    def _job_copy_text(self) -> str:
+        try:
+            return self.job_copy.read_text(encoding="utf-8")
+        except UnicodeDecodeError:
+            raise JobError(f"{self.job_copy}: not a TOML job file (not UTF-8 text)") from None
+        except OSError as error:
+            raise OutputError.from_os_error(error, self.job_copy, doing="read") from None
+
+    def _inputs_named_by(self, job: Job, recorded: dict[str, dict[str, str]]) -> dict[str, dict[str, str]]:
+        """The recorded hashes of the input files ``job`` names, by key and path as written."""
+        named = {key: {path: recorded[key][path] for path in paths if path in recorded.get(key, {})}
+                 for key, paths in input_paths(job).items()}
+        return {key: files for key, files in named.items() if files}
+
+    def check_inputs_recorded(self, job: Job) -> None:
+        """Refuse a stored ``job`` naming an input file whose hash :attr:`inputs` does not record:
+        its tasks cannot be told apart without it."""
+        for key, paths in input_paths(job).items():
+            for path in paths:
+                if path not in job.input_hashes.get(key, {}):
+                    raise JobError(f"output folder {self.root}: {self.inputs} records no hash of {key} {path!r}, "
+                                   f"which {self.job_copy} names; copy the job file last run into it as {JOB_COPY}, "
+                                   "or give another output folder")
 
     def check_schema(self) -> None:
         """Refuse a folder whose files record another output schema than this parsim's.
@@ -145,46 +181,105 @@ class OutputFolder:
                         "give another output folder or restore the file")
 
     def _recorded_inputs(self) -> dict[str, dict[str, str]]:
-        """The input hashes recorded by earlier runs; none for a folder that records none."""
+        """The input hashes recorded by earlier runs, {key: {path: sha256}}; none for a folder that records none."""
         if not self.inputs.exists():
             return {}
         try:
-            return json.loads(self.inputs.read_text())
-        except ValueError:
-            raise JobError(f"output folder {self.root}: {self.inputs} is not parsim's record of the input files; "
-                           f"give another output folder or remove {self.root}") from None
+            recorded = json.loads(self.inputs.read_bytes())
+        except ValueError:  # not JSON, or not UTF-8
+            recorded = None
+        except OSError as error:
+            raise OutputError.from_os_error(error, self.inputs, doing="read") from None
+        if not _is_input_record(recorded):
+            raise JobError(f"output folder {self.root}: {self.inputs} is not parsim's record of the input files "
+                           "({\"key\": {\"path\": \"sha256\"}}); copy it back from a copy of the folder, or give "
+                           "another output folder")
+        return recorded
+
+
+def _is_input_record(recorded: Any) -> bool:
+    """Whether ``recorded`` is laid out as :attr:`OutputFolder.inputs` records: {key: {path: sha256}}."""
+    return isinstance(recorded, dict) and all(
+        isinstance(files, dict) and all(isinstance(path, str) and isinstance(digest, str)
+                                        for path, digest in files.items())
+        for files in recorded.values())
+
+
+def input_paths(job: Job) -> dict[str, list[str]]:
+    """The input files ``job`` names, by key of :attr:`~parsim.job.Job.input_hashes` (``[[table]] key``
+    for a file named in an array of tables), each path once, as written; keys naming none are left out."""
+    named = {}
+    for parameter in (p for p in job.solver.parameters if p.is_file):
+        named[parameter.name] = job.sweep.get(parameter.name, [job.fixed[parameter.name]])
+    for table in job.solver.tables:
+        for parameter in (p for p in table.parameters if p.is_file):
+            named[f"[[{table.name}]] {parameter.name}"] = [entry.get(parameter.name, "")
+                                                           for entry in job.tables.get(table.name, ())]
+    paths = {key: [path for path in dict.fromkeys(values) if path] for key, values in named.items()}
+    return {key: listed for key, listed in paths.items() if listed}
 
 
 def open_output(root: Path) -> tuple[OutputFolder, Job]:
-    """The output folder ``root`` of a job and its job (from the folder's copy), schema checked."""
-    from parsim.solvers import SOLVERS  # here: the solvers import numba, which a folder alone does not need
-
+    """The output folder ``root`` of a job and its job, schema checked: the folder's copy of the job,
+    with the input hashes the folder records (:meth:`OutputFolder.stored_job`), so that the folder
+    reads alike from any working directory and after its input files were edited or removed."""
     folder = OutputFolder(root, job_name="")
-    if not folder.job_copy.exists():
-        raise JobError(f"{root} is not a parsim output folder (no {folder.job_copy.name} in it)")
-    job = parse_job(folder.job_copy.read_text(), SOLVERS, source=str(folder.job_copy), output=root)
+    job = folder.stored_job()
+    if job is None:
+        raise JobError(f"{root} is not a parsim output folder (no {folder.job_copy.name} in it); give the folder "
+                       "a job wrote: its key 'output' or the --output of parsim run")
     folder = OutputFolder(root, job.name)
     folder.check_schema()
+    folder.check_inputs_recorded(job)
     return folder, job
 
 
 def task_files(root: Path) -> list[Path]:
-    """The task files of the job of the output folder ``root``, in the job's order: those of tasks
-    the job no longer has (a shrunk job) and those of tasks that keep none are left out."""
+    """The task files of the job of the output folder ``root`` (:meth:`OutputFolder.existing_task_files`)."""
     folder, job = open_output(Path(root))
-    return [path for path in map(folder.task_path, job.tasks()) if path.exists()]
+    return folder.existing_task_files(job)
 
 
 _UNSET = object()
 
 
+@dataclass(frozen=True)
+class _InputFile:
+    """An input file as two runs in one folder compare it: by its content (the same file under
+    another name is the same input), shown with its path."""
+
+    path: str = field(compare=False)
+    content: str  # "sha256:..." of the recorded content, or the path where no hash is recorded
+
+    def __repr__(self) -> str:
+        digest = self.content.removeprefix("sha256:")
+        return f"{self.path!r} (sha256 {digest[:12]}...)" if digest != self.content else repr(self.path)
+
+
+def _input_file(job: Job, key: str, path: str) -> _InputFile | str:
+    """The value of input-file key ``key`` of ``job`` as :func:`_identity` compares it ("" names no file)."""
+    if not path:
+        return path
+    digest = job.input_hashes.get(key, {}).get(path)
+    return _InputFile(path, f"sha256:{digest}" if digest else path)
+
+
+def _table_identity(job: Job, name: str) -> list[dict]:
+    """The entries of ``[[name]]`` as :func:`_identity` compares them, input files by content."""
+    files = {p.name for p in job.solver.table(name).parameters if p.is_file}
+    return [{key: _input_file(job, f"[[{name}]] {key}", value) if key in files else value
+             for key, value in entry.items()} for entry in job.table_entries(name)]
+
+
 def _identity(job: Job) -> dict[str, Any]:
     """What must agree between two runs in one folder, key by key (the file's comments and layout,
-    the realisations, the swept values and ``configurations`` need not)."""
+    the realisations, the swept values, ``configurations`` and the names of input files need not)."""
+    files = {p.name for p in job.solver.parameters if p.is_file}
     return {"name": job.name, "kind": job.kind, "seed": job.seed,
             **{unit.key: job.units[unit.quantity] for unit in UNIT_KEYS},
-            **{f"[parameters] {key}": value for key, value in job.fixed.items()},
-            **{f"[[{key}]]": job.table_entries(key) for key in job.tables}}
+            **{f"[parameters] {key}": _input_file(job, key, value) if key in files else value
+               for key, value in job.fixed.items()},
+            **{f"[[{key}]]": _table_identity(job, key) for key in job.tables}}
 
 
 def _differences(then: Job, now: Job) -> list[str]:

@@ -91,9 +91,11 @@ def read_schema_attributes(path: Path) -> dict:
     try:
         with h5py.File(path, "r") as file:
             return {name: file.attrs[name] for name in (SCHEMA_ATTRIBUTE, VERSION_ATTRIBUTE) if name in file.attrs}
-    except OSError as error:
-        raise OutputError(f"cannot read task file {path}: {error}; "
-                          "remove the file and run the same command again to recompute its task") from None
+    except OSError as error:  # the task's row stays: removing the file loses the configuration alone
+        raise OutputError(f"cannot read task file {path}: {error}; remove it to use the folder again: its task "
+                          f"stays finished (its statistics are in {Path(path).parent.parent / 'rows'}), without "
+                          "its configuration, which only the job computed into another output folder gives "
+                          "again") from None
 
 
 def read_configuration(path: Path) -> Configuration:

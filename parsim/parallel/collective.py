@@ -9,10 +9,11 @@ sleep between polls instead of spinning in a blocking MPI call, so a long
 phase on rank 0 leaves their cores free.
 """
 
+import os
 import sys
 import threading
 import time
-from typing import Callable, TypeVar
+from typing import Callable, NoReturn, TypeVar
 
 import numpy as np
 from mpi4py import MPI
@@ -24,6 +25,8 @@ POLL_SECONDS = 1e-3
 ABORT_GRACE_SECONDS = 0.5
 #: How long a failing rank waits for its claim on the report (see FailureReport) before it reports anyway.
 CLAIM_TIMEOUT_SECONDS = 5.0
+#: How long a rank other than 0 that failed outside the task scheduler waits for rank 0's abort before its own.
+DEFER_TO_ROOT_SECONDS = 2.0
 T = TypeVar("T")
 
 
@@ -82,23 +85,40 @@ def wait_for(request: MPI.Request) -> None:
         time.sleep(POLL_SECONDS)
 
 
-def abort_job(comm: MPI.Comm, message: str, status: int = 1) -> None:
+def abort_job(comm: MPI.Comm, message: str, status: int = 1) -> NoReturn:
     """Print ``parsim: error: MESSAGE`` from this rank and end every rank of the job with ``status``."""
     try:
         sys.stdout.flush()
         print(f"\nparsim: error: {message}", file=sys.stderr, flush=True)
         time.sleep(ABORT_GRACE_SECONDS)  # let mpiexec forward the message before MPI_Abort ends the ranks
     finally:
-        comm.Abort(status)  # even if the message could not be printed (a closed pipe)
+        end_every_rank(comm, status)  # even if the message could not be printed (a closed pipe)
+
+
+def end_every_rank(comm: MPI.Comm, status: int) -> NoReturn:
+    """MPI_Abort on ``comm``, and this process's end even where MPI_Abort returns (MPICH's may, when
+    the launcher is ending the job already): nothing after an abort may run on."""
+    try:
+        comm.Abort(status)
+    finally:
+        os._exit(status)
 
 
 def abort_if_alone(comm: MPI.Comm, error: Exception) -> None:
     """End every rank when ``error`` was raised on this rank alone: the others would wait for it
-    for ever.  An error every rank raised alike (through :func:`on_root`) returns, to be reported
-    once by rank 0."""
+    for ever.  Returns, for the caller to report ``error`` once, when no other rank waits: on a
+    world of one rank, and for a ParsimError every rank raised alike (through :func:`on_root`).
+
+    Several ranks often fail alike at once (every rank's next write on a full disk, a bug on
+    the path every rank takes): a rank other than 0 waits :data:`DEFER_TO_ROOT_SECONDS` first,
+    so that rank 0's report and abort, if it failed too, are the only ones.
+    """
+    if comm.Get_size() == 1 or (isinstance(error, ParsimError) and raised_on_every_rank(error)):
+        return
+    if comm.Get_rank() > 0:
+        time.sleep(DEFER_TO_ROOT_SECONDS)
     if isinstance(error, ParsimError):
-        if not raised_on_every_rank(error):
-            abort_job(comm, f"{error} (on rank {comm.Get_rank()})", exit_status(error))
+        abort_job(comm, f"{error} (on rank {comm.Get_rank()})", exit_status(error))
     else:
         abort_job(comm, f"rank {comm.Get_rank()} failed: {describe_exception(error)}", exit_status(error))
 
@@ -125,7 +145,7 @@ class FailureReport:
         comm.Barrier()
         self._failing = threading.Lock()  # rank 0's two threads may fail together: one claims
 
-    def fail(self, message: str, status: int = 1) -> None:
+    def fail(self, message: str, status: int = 1) -> NoReturn:
         """Report ``message`` and end every rank with ``status``, unless another rank reported first."""
         if self._failing.acquire(blocking=False):
             answer = threading.Event()
@@ -134,7 +154,7 @@ class FailureReport:
             if not answer.wait(CLAIM_TIMEOUT_SECONDS) or first[0]:
                 abort_job(self._comm, message, status)
         time.sleep(CLAIM_TIMEOUT_SECONDS)  # the reporting rank's abort ends this one
-        self._comm.Abort(status)
+        end_every_rank(self._comm, status)
 
     def free(self) -> None:
         self._window.Free()

@@ -7,21 +7,24 @@ configurations (``sediment``, ``cluster``) also read one task file.  Only ``pars
 imports this package, so running jobs never needs matplotlib.
 """
 
-import tomllib
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
 import xarray as xr
 
 from parsim.errors import PlotError
+from parsim.output.collect import COMPLETED
 from parsim.output.dataset import check_dataset_schema
-from parsim.output.folder import JOB_COPY, TASKS, OutputFolder, task_files
+from parsim.output.folder import JOB_COPY, TASKS, open_output, task_files
 from parsim.plots import aggregation, deposition
-from parsim.plots.common import FigureSpec, save
+from parsim.plots.common import REALIZATION, FigureSpec, save
 
 FIGURES_BY_KIND = {"aggregation": aggregation.FIGURES, "deposition": deposition.FIGURES}
 FIGURES: dict[str, FigureSpec] = {name: spec for figures in FIGURES_BY_KIND.values() for name, spec in figures.items()}
 FIGURE_FOLDER = "figures"
+#: The attribute that every dataset of a job has, of any output schema.
+JOB_KIND = "job_kind"
 
 
 def plot_output(output: Path, figure: str | None = None, out: Path | None = None, task: str | None = None,
@@ -37,16 +40,17 @@ def plot_output(output: Path, figure: str | None = None, out: Path | None = None
     """
     dataset_path, tasks = _locate(Path(output))
     dataset = _open(dataset_path)
+    lacking = "the finished tasks lack" if COMPLETED in dataset.data_vars else "the dataset lacks"
     folder = dataset_path.parent / FIGURE_FOLDER
     if figure is not None:
         spec = _lookup(figure)
         return _draw(spec, dataset, tasks, task, Path(out) if out is not None else folder / spec.name, report)
     folder = Path(out) if out is not None else folder
     written = []
-    for spec in FIGURES_BY_KIND.get(dataset.attrs.get("job_kind"), FIGURES).values():
+    for spec in FIGURES_BY_KIND.get(dataset.attrs.get(JOB_KIND), FIGURES).values():
         missing = spec.missing(dataset)
         if missing:
-            report(f"skipped {spec.name}: the dataset lacks {'; '.join(missing)}")
+            report(f"skipped {spec.name}: {lacking} {'; '.join(missing)}")
             continue
         try:
             written += _draw(spec, dataset, tasks, task, folder / spec.name, report)
@@ -74,11 +78,9 @@ def _locate(output: Path) -> tuple[Path, Path]:
     """The dataset and the task folder of a job's output folder, or of its dataset file."""
     if output.is_file():
         return output, output.parent / TASKS
-    job_copy = output / JOB_COPY
-    if not job_copy.exists():
+    if not (output / JOB_COPY).exists():
         raise PlotError(f"{output} is neither a netCDF dataset nor a parsim output folder (no {JOB_COPY} in it)")
-    name = tomllib.loads(job_copy.read_text()).get("name", "")
-    folder = OutputFolder(output, name)
+    folder, _ = open_output(output)
     if not folder.dataset.exists():
         raise PlotError(f"no dataset {folder.dataset}: it is written when every task has finished "
                         f"(parsim info {output} says how far the job got)")
@@ -86,14 +88,31 @@ def _locate(output: Path) -> tuple[Path, Path]:
 
 
 def _open(path: Path) -> xr.Dataset:
-    """The dataset at ``path``; one of another output schema (another coding of ``component``) is refused."""
+    """The dataset at ``path``, in one line if it cannot be read or parsim did not write it; one of
+    another output schema (another coding of ``component``) is refused; of a partial dataset, the
+    part its finished tasks give (:func:`_finished_part`)."""
     try:
         with xr.open_dataset(path) as dataset:
             dataset = dataset.load()
-    except (OSError, ValueError) as error:
-        raise PlotError(f"cannot read {path} as a netCDF dataset: {error}") from None
+    except (OSError, ValueError) as error:  # not netCDF (a text, an image, an empty file), or damaged
+        reason = str(error).strip().split("\n", 1)[0].split(". ", 1)[0] or type(error).__name__
+        raise PlotError(f"cannot read {path} as a netCDF dataset: {reason}") from None
+    if JOB_KIND not in dataset.attrs:  # another netCDF or HDF5 file, a task file
+        raise PlotError(f"{path} is not the dataset of a parsim job (it has no attribute {JOB_KIND}): give a job's "
+                        "NAME.nc or NAME.partial.nc, or its output folder")
     check_dataset_schema(dataset, path)
-    return dataset
+    return _finished_part(dataset)
+
+
+def _finished_part(dataset: xr.Dataset) -> xr.Dataset:
+    """A partial dataset (``parsim collect``) without the swept values for which no task has finished,
+    so that figures show what the finished tasks give and skip what they do not; any other as it is."""
+    if COMPLETED not in dataset.data_vars:
+        return dataset
+    completed = dataset[COMPLETED].astype(bool)
+    swept = [dim for dim in completed.dims if dim != REALIZATION]
+    return dataset.isel({dim: np.flatnonzero(completed.any([other for other in completed.dims if other != dim]).values)
+                         for dim in swept})
 
 
 def _task_file(tasks: Path, label: str | None) -> Path:

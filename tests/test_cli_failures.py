@@ -1,0 +1,170 @@
+"""Every failure of the command line ends in one line, or for a bug in one traceback, never two.
+
+A phase made to fail (by a small script that replaces it, then runs the command line) shows
+what the terminal gets: one line ``parsim: error: ...`` with the right status; a bug's
+traceback once, however many ranks met it; Ctrl-C while parsim starts, one line and status
+130; a reader that closes the pipe, a quiet end.
+"""
+
+import os
+import signal
+import subprocess
+import sys
+
+import pytest
+
+from parsim.cli import _duration, main
+from parsim.output.folder import OutputFolder
+from parsim.job import parse_job
+from parsim.solvers import SOLVERS
+from tests.mpi import error_lines, mpiexec, run_mpi
+
+JOB = """
+name = "failing"
+kind = "aggregation"
+seed = 1
+realizations = 2
+[parameters]
+dimension = 2
+n_spheres = 25
+volume_fraction = 0.2
+"""
+
+PATCHED = """
+import os, signal, sys, time
+import {module}
+from parsim.errors import OutputError
+from mpi4py import MPI
+
+def replaced(*args, **kwargs):
+    if {ranks} is None or MPI.COMM_WORLD.Get_rank() in {ranks}:
+        {action}
+    return original(*args, **kwargs)
+
+original = {module}.{name}
+{module}.{name} = replaced
+from parsim.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def patched_script(tmp_path, target: str, action: str, ranks=None) -> str:
+    """A script that runs the command line with ``target`` (module.function) doing ``action`` first
+    (on the ``ranks`` listed, or every rank); its path."""
+    module, name = target.rsplit(".", 1)
+    script = tmp_path / "patched.py"
+    script.write_text(PATCHED.format(module=module, name=name, action=action, ranks=ranks))
+    return str(script)
+
+
+@pytest.fixture
+def job(tmp_path):
+    path = tmp_path / "job.toml"
+    path.write_text(JOB)
+    return path
+
+
+def lines(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.strip()]
+
+
+def test_a_bug_in_a_one_rank_run_is_raised_once(job, tmp_path, monkeypatch):
+    import parsim.runner
+
+    def bug(*args, **kwargs):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(parsim.runner, "run_job", bug)
+    with pytest.raises(RuntimeError, match="a bug"):  # its one traceback, no error about the run's outcome
+        main(["run", str(job), "--output", str(tmp_path / "out"), "--quiet"])
+
+
+def test_an_error_of_a_one_rank_run_is_one_line(job, tmp_path):
+    script = patched_script(tmp_path, "parsim.runner.run_job", "raise OutputError('no space left on the disk')")
+    result = subprocess.run([sys.executable, script, "run", str(job), "--output", str(tmp_path / "out")],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 1
+    assert lines(result.stderr) == ["parsim: error: no space left on the disk"]
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("target, action, ranks, status, line", [
+    # a bug on the path every rank takes: one traceback, not one per rank
+    ("parsim.runner.run_job", "raise RuntimeError('a bug')", None, 1, "parsim: error: rank 0 failed: Traceback"),
+    # a bug in a phase of rank 0 alone
+    ("parsim.runner._claim", "raise RuntimeError('a bug')", None, 1, "parsim: error: rank 0 failed: Traceback"),
+    # the same error on every rank, as a full disk gives: one line
+    ("parsim.runner.run_job", "raise OutputError('no space left')", None, 1,
+     "parsim: error: no space left (on rank 0)"),
+    # an error of one rank other than 0: its line
+    ("parsim.runner.run_job", "raise OutputError('no space left')", [1], 1,
+     "parsim: error: no space left (on rank 1)"),
+])
+def test_a_failure_under_mpi_is_reported_once(job, tmp_path, target, action, ranks, status, line):
+    script = patched_script(tmp_path, target, action, ranks)
+    result = run_mpi([script, "run", str(job), "--output", str(tmp_path / "out"), "--quiet"], timeout=120)
+    assert result.returncode == status, result.stderr
+    reported = [text for text in error_lines(result.stderr) if text.startswith("parsim: error:")]
+    assert len(reported) == 1 and reported[0].startswith(line), result.stderr
+    assert result.stderr.count("Traceback") <= 1 and "UnboundLocalError" not in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("command", ["run", "validate"])
+def test_ctrl_c_while_the_job_is_read_is_one_line(job, tmp_path, command):
+    script = patched_script(tmp_path, "parsim.job.load_job", "os.kill(os.getpid(), signal.SIGINT); time.sleep(30)")
+    result = subprocess.run([sys.executable, script, command, str(job), "--output", str(tmp_path / "out")],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 128 + signal.SIGINT
+    assert len(lines(result.stderr)) == 1 and lines(result.stderr)[0].startswith("parsim: interrupted"), result.stderr
+
+
+def test_ctrl_c_while_mpi_starts_is_one_line(job, tmp_path, monkeypatch, capsys):
+    import parsim.parallel.launcher
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(parsim.parallel.launcher, "start_mpi", interrupted)
+    assert main(["run", str(job), "--output", str(tmp_path / "out")]) == 128 + signal.SIGINT
+    assert lines(capsys.readouterr().err) == ["parsim: interrupted before any task started"]
+
+
+def test_info_into_a_closed_pipe_ends_quietly(job, tmp_path):
+    out = tmp_path / "out"
+    OutputFolder(out, "failing").prepare(parse_job(JOB, SOLVERS, output=out), None)
+    reader, writer = os.pipe()
+    os.close(reader)  # the reader is gone before parsim writes, as `parsim info OUT | head -1` may leave it
+    result = subprocess.run([sys.executable, "-m", "parsim", "info", str(out)], stdout=writer,
+                            stderr=subprocess.PIPE, text=True, timeout=120)
+    os.close(writer)
+    assert result.stderr == ""
+    assert result.returncode == 128 + signal.SIGPIPE
+
+
+@pytest.mark.parametrize("limit", ["-00:00:05", "-1-00:00:00", "1--00:00:05", "1-", "+1-00:00:00"])
+def test_a_negative_or_malformed_time_limit_is_refused(limit):
+    with pytest.raises(Exception, match="allowed: HH:MM:SS or D-HH:MM:SS"):
+        _duration(limit)
+
+
+def test_a_negative_time_limit_is_one_line(job, capsys):
+    with pytest.raises(SystemExit) as ended:
+        main(["run", str(job), "--time-limit=-00:00:05"])
+    assert ended.value.code == 2
+    (line,) = lines(capsys.readouterr().err)
+    assert line.startswith("parsim: error: argument --time-limit: '-00:00:05': allowed: HH:MM:SS")
+
+
+def test_nothing_runs_on_after_an_abort_that_returns(tmp_path):
+    # MPICH's MPI_Abort may return when the launcher is ending the job already; the rank must end anyway,
+    # or the command would go on with a result it does not have
+    script = tmp_path / "returning.py"
+    script.write_text("from parsim.parallel.collective import abort_job\n"
+                      "class Returning:\n"
+                      "    def Abort(self, status):\n"
+                      "        pass\n"
+                      "abort_job(Returning(), 'no space left', 3)\n"
+                      "print('ran on')\n")
+    result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 3 and "ran on" not in result.stdout
+    assert lines(result.stderr) == ["parsim: error: no space left"]
