@@ -3,7 +3,14 @@
 import numpy as np
 import pytest
 
-from parsim.core.sediment import filling_height, packing_fraction, packing_fraction_profile
+from parsim.core.sediment import (
+    _lens_volume,
+    filling_height,
+    packing_fraction,
+    packing_fraction_profile,
+    union_volume_and_height,
+)
+from parsim.core.shapes.union import centre_of_mass_of_union
 from parsim.core.structure import coordination
 
 
@@ -88,3 +95,49 @@ def test_filling_height_is_twice_the_volume_weighted_centre():
     assert filling_height([1.0, 3.0], [3.0, 1.0]) == 3.0
     with pytest.raises(ValueError):
         filling_height([], [])
+
+
+def collinear_union_volume(n, spacing, radius):
+    """Volume of the union of n equal spheres whose centres lie on a line ``spacing`` <= 2 radius apart: each
+    cross-section perpendicular to the line is the disc of the nearest centre, so the union is cut into
+    pieces at the midpoints between centres, the middle ones alike."""
+    middle = np.pi * (radius**2 * spacing - spacing**3 / 12.0)
+    end = np.pi * (radius**2 * (0.5 * spacing + radius) - ((0.5 * spacing) ** 3 + radius**3) / 3.0)
+    return 2.0 * end + (n - 2) * middle
+
+
+@pytest.mark.parametrize("spacing, rel", [(1.5, 1e-12), (1.0, 1e-12), (0.5, 5e-4)])
+def test_union_of_a_tilted_rod(spacing, rel):
+    """Spacings of 1 radius and more overlap pairwise: exact; below, three spheres overlap and the union is
+    integrated on columns (errors about 2e-4)."""
+    radius, n = 0.5, 7
+    line = np.array([0.6, 0.0, 0.8])
+    centres = np.array([2.0, 1.0, 3.0]) + np.outer(np.arange(n) - 0.5 * (n - 1), spacing * radius * line)
+    volume, height = union_volume_and_height(centres, np.full(n, radius))
+    assert volume == pytest.approx(collinear_union_volume(n, spacing * radius, radius), rel=rel)
+    assert height == pytest.approx(3.0, rel=rel)  # the middle sphere's centre, by symmetry
+
+
+def test_union_of_two_unequal_spheres():
+    big, small, distance = 1.0, 0.6, 0.9
+    centres = np.array([[0.0, 0.0, 2.0], [0.0, 0.6 * distance, 2.0 + 0.8 * distance]])
+    volume, height = union_volume_and_height(centres, [big, small])
+    lens = _lens_volume(big, small, distance)  # Weisstein's closed form
+    assert volume == pytest.approx(4.0 / 3.0 * np.pi * (big**3 + small**3) - lens, rel=1e-12)
+    columns, _ = centre_of_mass_of_union(centres, np.array([big, small]), resolution=128)
+    assert height == pytest.approx(columns[2], abs=1e-5)
+    # a sphere inside the other adds nothing
+    inside = np.array([[0.0, 0.0, 2.0], [0.0, 0.1, 2.2]])
+    volume, height = union_volume_and_height(inside, [big, small])
+    assert volume == pytest.approx(4.0 / 3.0 * np.pi * big**3, rel=1e-12)
+    assert height == pytest.approx(2.0, rel=1e-12)
+
+
+def test_union_of_spheres_apart_is_their_sum():
+    rng = np.random.default_rng(3)
+    centres = np.column_stack([np.arange(50) * 3.0, rng.random(50), 1.0 + rng.random(50)])
+    radii = rng.uniform(0.5, 1.0, 50)
+    volume, height = union_volume_and_height(centres, radii)
+    sphere = 4.0 / 3.0 * np.pi * radii**3
+    assert volume == pytest.approx(sphere.sum(), rel=1e-14)
+    assert height == pytest.approx(np.dot(sphere, centres[:, 2]) / sphere.sum(), rel=1e-14)

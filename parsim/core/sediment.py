@@ -2,6 +2,8 @@
 
 - :func:`filling_height`: twice the height of the centre of mass of the packing,
   2 z_cm (section 4.1, Fig. 8), each particle weighted by its volume;
+- :func:`union_volume_and_height`: volume and centre-of-mass height of the union of spheres
+  (a substrate's material, overlaps counted once);
 - :func:`packing_fraction`, :func:`packing_fraction_profile`, :func:`packing_fractions`: the
   fraction of horizontal slabs of the box covered by the union of the spheres, for the bulk
   value (slab 0.25 h … 0.75 h) and the profile φ(z);
@@ -27,6 +29,7 @@ box, so periodic wrapping changes nothing for them).
 import numpy as np
 
 from parsim.core.jit import jit
+from parsim.core.shapes.union import centre_of_mass_of_union
 
 # Two spheres of different particles are in contact when their gap is below this
 # fraction of the mean radius: the solver closes contacts to ~1e-12, and the paper's
@@ -53,6 +56,66 @@ def filling_height(particle_com_z, particle_volume):
     if z.shape != volume.shape or z.size == 0:
         raise ValueError("particle_com_z and particle_volume must be non-empty and of the same shape")
     return 2.0 * float(np.dot(volume, z) / volume.sum())
+
+
+def union_volume_and_height(positions, radii):
+    """Volume of the union of spheres (overlaps counted once) and the height of its centre of mass.
+
+    By inclusion and exclusion, exact where no point lies in three spheres: every sphere counts
+    4/3 π r³ at its centre, and every lens of two overlapping spheres is taken off once, its volume
+    and centroid in closed form (see :func:`_lens_volume_and_centroid`). Where three spheres or
+    more overlap (a sphere whose caps towards its overlapping neighbours meet, see
+    :func:`_classify_caps`), the union of those spheres is integrated on vertical columns by
+    :func:`parsim.core.shapes.union.centre_of_mass_of_union`, the integration that gives every
+    particle template its volume (errors below 2e-4), and only their lenses with the other spheres
+    are taken off. Overlaps are found in the cubic cell grid: O(n). No periodic images: the
+    spheres of one particle must lie together, as a sediment's do.
+    """
+    x = np.ascontiguousarray(positions, dtype=np.float64)
+    r = np.ascontiguousarray(radii, dtype=np.float64)
+    margin = 2.0 * r.max()  # the grid's periodic sides lie so far out that no sphere meets an image
+    grid = _SphereGrid(x, r, x[:, :2].min(axis=0) - margin, x[:, :2].max(axis=0) + margin)
+    centres, sorted_radii, _, start, lower, upper, _, _, cells = grid.arrays()
+    first, neighbour, offset = _overlap_lists(centres, sorted_radii, OVERLAP_TOLERANCE * float(np.mean(r)), start,
+                                              lower, upper, cells)
+    axis, plane, distance = _caps(sorted_radii, first, neighbour, offset)
+    everything = np.array([centres[:, 2].min() - margin, centres[:, 2].max() + margin])  # one slab holds every lens
+    _, kind = _classify_caps(centres, sorted_radii, first, neighbour, offset, axis, plane, distance, everything)
+    owner = np.repeat(np.arange(len(sorted_radii)), np.diff(first))
+    multiple = np.zeros(len(sorted_radii), dtype=bool)
+    multiple[owner[kind == 2]] = True
+    single = ~multiple
+    sphere = 4.0 / 3.0 * np.pi * sorted_radii[single] ** 3
+    volume, moment = float(sphere.sum()), float(np.dot(sphere, centres[single, 2]))
+    # each lens with a sphere outside the multiple overlaps appears in the rows of both its spheres: half in each
+    rows = single[owner] | single[neighbour]
+    lens, along = _lens_volume_and_centroid(sorted_radii[owner[rows]], sorted_radii[neighbour[rows]], distance[rows])
+    volume -= 0.5 * float(lens.sum())
+    moment -= 0.5 * float(np.dot(lens, centres[owner[rows], 2] + along * axis[rows, 2]))
+    if multiple.any():
+        centre, united = centre_of_mass_of_union(centres[multiple], sorted_radii[multiple])
+        volume, moment = volume + united, moment + united * float(centre[2])
+    return volume, moment / volume
+
+
+def _lens_volume_and_centroid(r_i, r_j, d):
+    """Volume of the lens S_i ∩ S_j of overlapping spheres of radii ``r_i``, ``r_j`` whose centres are ``d``
+    apart, and the distance of its centroid from centre i towards centre j (arrays).
+
+    The lens is a cap of each sphere cut by the plane of their meeting circle, t = (d² + r_i² − r_j²) / 2d
+    from centre i; a cap of height a of a sphere of radius R has volume π a² (3R − a) / 3 and its
+    centroid 3 (2R − a)² / (4 (3R − a)) from the sphere's centre. When one sphere holds the other, the
+    plane lies beyond it and its cap is the whole sphere (a = 2R), the other cap empty.
+    """
+    d = np.maximum(d, np.finfo(np.float64).tiny)  # coincident centres: the plane at infinity, or at the centre
+    with np.errstate(over="ignore"):
+        t = (d * d + r_i * r_i - r_j * r_j) / (2.0 * d)
+    a_i, a_j = np.clip(r_i - t, 0.0, 2.0 * r_i), np.clip(r_j - (d - t), 0.0, 2.0 * r_j)
+    cap_i, cap_j = np.pi * a_i**2 * (3.0 * r_i - a_i) / 3.0, np.pi * a_j**2 * (3.0 * r_j - a_j) / 3.0
+    centroid_i = 3.0 * (2.0 * r_i - a_i) ** 2 / (4.0 * (3.0 * r_i - a_i))
+    centroid_j = d - 3.0 * (2.0 * r_j - a_j) ** 2 / (4.0 * (3.0 * r_j - a_j))
+    volume = cap_i + cap_j
+    return volume, (cap_i * centroid_i + cap_j * centroid_j) / volume
 
 
 def packing_fraction(positions, radii, box_lower_xy, box_upper_xy, z_low, z_high, samples=DEFAULT_SAMPLES):

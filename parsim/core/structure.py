@@ -4,7 +4,8 @@
   :func:`lab_axes` to carry it into the lab frame;
 - orientational order of the long axes: :func:`nematic_order` (S and the director),
   :func:`vertical_order` (<P2(cos θ)> about z) and :func:`angle_distribution` (p(θ));
-- positional order: :func:`radial_distribution`, g(r) of the particle centres in a slab;
+- positional order: :func:`radial_distribution`, g(r) of the particle centres in a slab, and
+  :func:`region_radial_distribution` in a region of any shape;
 - contact network: :func:`contact_pairs` (sphere–sphere contacts between particles and their normals),
   :func:`contacts_per_particle`, :func:`contact_number_distribution`, :func:`fabric_tensor` and
   :func:`fabric_anisotropy`.
@@ -136,12 +137,32 @@ def radial_distribution(centres, box_lower_xy, box_upper_xy, periodic, z_low, z_
     """
     x = _as_points(centres)
     lower, upper = np.asarray(box_lower_xy, dtype=np.float64), np.asarray(box_upper_xy, dtype=np.float64)
-    if not (z_high > z_low and r_max > 0.0 and bins >= 1):
-        raise ValueError(f"need z_high > z_low, r_max > 0 and bins >= 1, got {z_low}, {z_high}, {r_max}, {bins}")
-    if periodic and r_max > 0.5 * np.min(upper - lower):
-        raise ValueError(f"r_max = {r_max} exceeds half the periodic box width {upper - lower}")
+    if not z_high > z_low:
+        raise ValueError(f"need z_high > z_low, got {z_low}, {z_high}")
     in_region = _in_box(x, lower, upper, periodic, z_low, z_high, 0.0)
     reference = np.flatnonzero(_in_box(x, lower, upper, periodic, z_low, z_high, r_max))
+    return region_radial_distribution(x, in_region, np.prod(upper - lower) * (z_high - z_low), reference, r_max,
+                                      bins, lower, upper, periodic, max_references)
+
+
+def region_radial_distribution(centres, in_region, region_volume, reference, r_max, bins, box_lower_xy,
+                               box_upper_xy, periodic, max_references=None):
+    """g(r) of the centres in a region of any shape: (r, g, number of references).
+
+    The estimator of :func:`radial_distribution` for a region given by the mask ``in_region`` of
+    the N_V centres it holds and its volume ``region_volume`` (ρ = N_V / volume), and the indices
+    ``reference`` of the reference centres, which the caller chooses at least ``r_max`` inside the
+    region (e.g. within a disc shrunk by r_max). The box (``box_lower_xy`` … ``box_upper_xy``) lays
+    out the cell list and, when ``periodic`` in x and y, gives the minimum images.
+    """
+    x = _as_points(centres)
+    lower, upper = np.asarray(box_lower_xy, dtype=np.float64), np.asarray(box_upper_xy, dtype=np.float64)
+    if not (r_max > 0.0 and bins >= 1 and region_volume > 0.0):
+        raise ValueError(f"need r_max > 0, bins >= 1 and a region of positive volume, got {r_max}, {bins}, "
+                         f"{region_volume}")
+    if periodic and r_max > 0.5 * np.min(upper - lower):
+        raise ValueError(f"r_max = {r_max} exceeds half the periodic box width {upper - lower}")
+    reference = np.asarray(reference, dtype=np.int64)
     if max_references is not None and len(reference) > max_references:
         reference = reference[np.linspace(0, len(reference) - 1, max_references).astype(np.int64)]
     edges = np.linspace(0.0, r_max, bins + 1)
@@ -152,7 +173,7 @@ def radial_distribution(centres, box_lower_xy, box_upper_xy, periodic, z_low, z_
     _, _, order, start, _, _, z_lower, cell_height, cells = grid.arrays()
     counts = _shell_counts(x, reference, r_max, bins, bool(periodic), order, start, lower, upper, z_lower,
                            cell_height, cells)
-    density = np.count_nonzero(in_region) / (np.prod(upper - lower) * (z_high - z_low))
+    density = np.count_nonzero(in_region) / region_volume
     shell = 4.0 / 3.0 * np.pi * (edges[1:] ** 3 - edges[:-1] ** 3)
     return r, counts / (len(reference) * density * shell), len(reference)
 

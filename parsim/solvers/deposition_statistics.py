@@ -10,7 +10,17 @@
   centres of mass, distribution of contact numbers and the fabric tensor of the contact
   normals.
 
-The bulk is the slab ``BULK_SLAB`` of the filling height, away from floor and surface.
+Heights count from the floor z = 0. The filling height h is 2 z_cm of the whole pile: the
+deposited particles and, with a substrate, the union of its spheres, each weighted by its
+volume of material. The substrate's share of it, z_b = h V_substrate / (V_substrate +
+V_particles), is the height its material would fill at the pile's mean packing; the deposit
+is z_b ... h. This stays meaningful for a sparse substrate (a few boulders the deposit fills
+around), which has no level top.
+
+The bulk is the middle of the deposit, z_b + ``BULK_SLAB`` (h - z_b), away from floor,
+substrate and surface; in a walled box or a cylinder it also keeps ``BULK_WALL_DIAMETERS``
+mean volume-equivalent particle diameters from the walls (:class:`Region`). A particle is in
+the bulk when its centre of mass is.
 """
 
 import math
@@ -20,12 +30,21 @@ import numpy as np
 
 from parsim.core import sdbd
 from parsim.core import structure
-from parsim.core.sediment import filling_height, packing_fractions
+from parsim.core.sediment import (
+    CONTACT_GAP_TOLERANCE,
+    filling_height,
+    packing_fraction,
+    packing_fractions,
+    union_volume_and_height,
+)
 from parsim.parameters import Parameter
 from parsim.solver import LENGTH_UNITS, Coordinate, Statistic, coded_coordinate
-from parsim.solvers.deposition_materials import mesh_approximation
+from parsim.solvers.deposition_materials import mesh_approximation, mesh_volume
 
-BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the filling height, away from floor and surface
+BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the deposit, z_b + BULK_SLAB (h - z_b), away from floor and surface
+# With walls the bulk keeps this many mean volume-equivalent particle diameters from them: the distance at
+# which benchmarks/wall_packing.py finds the packing of spheres as in a periodic box.
+BULK_WALL_DIAMETERS = 4.0
 PROFILE_TOP = 1.25  # the profile phi(z) covers 0 <= z <= PROFILE_TOP x filling height
 RDF_REFERENCES = 2000  # g(r) from at most this many reference centres (noise ~ 1/sqrt of it per shell)
 MAX_CONTACT_NUMBER = 24  # the distribution of contact numbers counts 0 ... this
@@ -40,14 +59,24 @@ PARAMETERS = (
 )
 
 STATISTICS = (
-    Statistic("filling_height", LENGTH_UNITS, "filling height 2 z_cm, particles weighted by volume (section 4.1)"),
-    Statistic("bulk_packing_fraction", "1", "packing fraction between 0.25 and 0.75 of the filling height "
-              "(NaN without lateral boundaries)"),
-    Statistic("packing_profile", "1", "packing fraction phi(z) of horizontal slabs (NaN without lateral "
-              "boundaries)", dims=("z_relative",)),
+    Statistic("filling_height", LENGTH_UNITS, "filling height h = 2 z_cm of the pile above the floor z = 0: the "
+              "deposited particles and the union of the substrate's spheres, each weighted by its volume "
+              "(section 4.1)"),
+    Statistic("substrate_height", LENGTH_UNITS, "the substrate's share z_b = h V_substrate / (V_substrate + "
+              "V_particles) of the filling height: the height its material fills at the pile's mean packing; the "
+              "deposit lies between z_b and h (0 without substrate)"),
+    Statistic("bulk_wall_distance", LENGTH_UNITS, "distance the bulk keeps from the walls of a walled box or a "
+              f"cylinder, {BULK_WALL_DIAMETERS:g} mean volume-equivalent particle diameters (0 in a periodic box "
+              "and on an open floor)"),
+    Statistic("bulk_packing_fraction", "1", "packing fraction of the bulk, the middle half z_b + [0.25, 0.75] "
+              "(h - z_b) of the deposit, substrate spheres included; with walls the spheres of the particles whose "
+              "centre of mass lies bulk_wall_distance or more from them, each with its volume in the slab, over "
+              "the area so bounded (NaN without lateral boundaries or when the container is too narrow for a bulk)"),
+    Statistic("packing_profile", "1", "packing fraction phi(z) of horizontal slabs of the container, substrate "
+              "spheres included (NaN without lateral boundaries)", dims=("z_relative",)),
     Statistic("bulk_coordination", "1", "mean number of sphere-sphere contacts with other particles, per "
-              "particle with its centre of mass in the bulk slab"),
-    Statistic("n_bulk_particles", "1", "particles in the bulk slab", dtype="int64"),
+              "particle with its centre of mass in the bulk"),
+    Statistic("n_bulk_particles", "1", "particles with their centre of mass in the bulk", dtype="int64"),
     Statistic("n_spheres", "1", "spheres in the sediment", dtype="int64"),
     Statistic("events_per_particle", "1", "mean number of events per particle"),
     Statistic("largest_steps_per_particle", "1", "the most decide-and-move steps one particle needed (bounded "
@@ -56,7 +85,8 @@ STATISTICS = (
     Statistic("cycling_interruptions", "1", "interruptions of infinite cycling (section 4.2)", dtype="int64"),
     Statistic("simultaneous_events", "1", "simultaneous events (section 4.3)", dtype="int64"),
     Statistic("hanging_particles", "1", "particles hanging on one or two contacts", dtype="int64"),
-    Statistic("particles_on_floor", "1", "particles resting on the floor", dtype="int64"),
+    Statistic("particles_on_floor", "1", "particles touching the floor: a sphere with z - r within the contact "
+              "gap tolerance (1e-6 mean radii), whatever the state they rest in", dtype="int64"),
     Statistic("spheres_per_second", "s-1", "spheres deposited per wall-clock second, first "
               "timing_skip_fraction of the particles left out (section 5)", measured=True),
     # mixtures
@@ -67,10 +97,15 @@ STATISTICS = (
               "slabs of packing_profile; over the species they add up to phi(z) of the deposited particles "
               "(NaN without lateral boundaries)", dims=("species", "z_relative")),
     Statistic("species_mean_height", "1", "mean height of each species' centres of mass, weighted by particle "
-              "volume, over the filling height (1/2 for the whole sediment)", dims=("species",)),
-    Statistic("segregation_index", "1", "2 (max_s <z>_s - min_s <z>_s) / h, <z>_s the volume-weighted mean "
-              "height of species s: 0 when the species are mixed, 1 when two lie in separate layers (up to 2 for "
-              "many layers; 0 for one species)"),
+              "volume, in the deposit: (<z>_s - z_b) / (h - z_b), z_b = substrate_height (1/2 for the whole deposit "
+              "without substrate)", dims=("species",)),
+    Statistic("segregation_index", "1", "2 (max_s <z>_s - min_s <z>_s) / (h - z_b), <z>_s the volume-weighted "
+              "mean height of species s: 0 when the species are mixed, 1 when two lie in separate layers (up to 2 "
+              "for many layers; 0 for one species)"),
+    Statistic("species_volume", f"{LENGTH_UNITS}3", "volume of the union of a species' spheres at size factor 1",
+              dims=("species",)),
+    Statistic("species_mesh_volume", f"{LENGTH_UNITS}3", "volume enclosed by a mesh species' surface at size "
+              "factor 1 (NaN for other shapes)", dims=("species",)),
     Statistic("species_mesh_volume_error", "1", "relative volume error (V_spheres - V_mesh) / V_mesh of a mesh "
               "species' spheres (NaN for other shapes)", dims=("species",)),
     Statistic("species_mesh_surface_distance", "1", "largest distance between a mesh species' surface and "
@@ -94,21 +129,67 @@ STATISTICS = (
               dims=("fabric_row", "fabric_column")),
 )
 
-STATE_COUNTS = {"hanging_particles": (sdbd.HANGING_ONE, sdbd.HANGING_TWO), "particles_on_floor": (sdbd.RESTING_ON_FLOOR,)}
+HANGING = (sdbd.HANGING_ONE, sdbd.HANGING_TWO)
 EVENT_TOTALS = {"frustrated_steps": "frustrated_trial_rotation", "cycling_interruptions": "cycling_interruption",
                 "simultaneous_events": "simultaneous"}
 
 
 @dataclass(frozen=True)
 class Region:
-    """Where the sediment is measured: the horizontal box (periodic or not) and the fraction of it
-    inside the container (1 for a box, the polygon's area over the square's for a cylinder)."""
+    """Where the sediment is measured.
+
+    ``lower``, ``upper``: the horizontal box of the measuring kernels, periodic or not (the
+    container's box; a cylinder's bounding square; a heap's extent with a margin);
+    ``inside_fraction``: the container's share of the box (the polygon's area over the square's for
+    a cylinder); ``measured``: False for a heap, which has no packing fraction.
+
+    The bulk's horizontal area: the whole periodic box (or a heap's box); with walls the box
+    shrunk by ``wall_distance``; in a cylinder the disc of radius r_in - ``wall_distance`` about
+    its axis, ``disc`` = (x, y, r_in) with r_in the inscribed radius of the wall's polygon, so that
+    every point of the area is at least ``wall_distance`` from every side.
+    """
 
     lower: np.ndarray
     upper: np.ndarray
     periodic: bool
-    measured: bool  # False for a heap: no packing fraction
+    measured: bool
     inside_fraction: float = 1.0
+    wall_distance: float = 0.0
+    disc: tuple | None = None
+
+    def bulk_area(self) -> float:
+        """Area of the bulk's horizontal section (0 when the walls leave no room for it)."""
+        if self.disc is not None:
+            return math.pi * max(self.disc[2] - self.wall_distance, 0.0) ** 2
+        return float(np.prod(np.maximum(self.upper - self.lower - 2.0 * self.wall_distance, 0.0)))
+
+    def in_bulk_area(self, xy: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """Which points ``xy`` (n, 2) lie in the bulk's area at least ``margin`` from its edges (a periodic
+        box has none)."""
+        if self.periodic:
+            return np.ones(len(xy), dtype=bool)
+        reach = self.wall_distance + margin
+        if self.disc is not None:
+            x, y, radius = self.disc
+            return np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= radius - reach
+        return np.all((xy >= self.lower + reach) & (xy <= self.upper - reach), axis=1)
+
+
+@dataclass(frozen=True)
+class Heights:
+    """Heights of the pile above the floor z = 0: the filling height h and the substrate's share z_b of it."""
+
+    filling: float
+    substrate: float = 0.0
+
+    def bulk_slab(self) -> tuple[float, float]:
+        """The middle of the deposit, z_b + BULK_SLAB (h - z_b)."""
+        thickness = self.filling - self.substrate
+        return self.substrate + BULK_SLAB[0] * thickness, self.substrate + BULK_SLAB[1] * thickness
+
+    def in_deposit(self, z):
+        """Heights ``z`` over the deposit's thickness, (z - z_b) / (h - z_b): 0 at z_b, 1 at h."""
+        return (z - self.substrate) / (self.filling - self.substrate)
 
 
 def coordinates(constants: dict) -> dict[str, Coordinate]:
@@ -140,83 +221,132 @@ def species_names(constants: dict) -> list[str]:
 
 def measure(params, result, species, drops, geometry, skip, substrate) -> dict:
     """Every statistic of a finished task (``result``: :class:`parsim.core.sdbd.DepositionResult`,
-    ``geometry``: the container as the kernel took it)."""
-    region = measuring_region(params, geometry, result)
+    ``geometry``: the container as the kernel took it, ``substrate``: (centres, radii), empty without one)."""
     volume = np.array([s.volume for s in species])[drops.species] * drops.scale**3
-    height = filling_height(result.center_of_mass[:, 2], volume)
-    slab = (BULK_SLAB[0] * height, BULK_SLAB[1] * height)
-    in_bulk = (result.center_of_mass[:, 2] >= slab[0]) & (result.center_of_mass[:, 2] < slab[1])
+    diameter = float(np.mean(np.array([s.equivalent_diameter for s in species])[drops.species] * drops.scale))
+    region = measuring_region(params, geometry, result, diameter)
+    heights = pile_heights(result.center_of_mass[:, 2], volume, substrate)
+    slab = heights.bulk_slab()
+    com = result.center_of_mass
+    in_area = region.in_bulk_area(com[:, :2])
+    in_bulk = in_area & (com[:, 2] >= slab[0]) & (com[:, 2] < slab[1])
     positions = np.concatenate([substrate[0], result.positions])
     radii = np.concatenate([substrate[1], result.radii])
     # the substrate is one more particle, index n, never in the bulk
     particle = np.concatenate([np.full(len(substrate[1]), len(drops.scale)), result.particle])
+    # a substrate sphere is in the bulk's area when its centre is, a deposited one when its particle's centre is
+    sphere_in_area = np.concatenate([region.in_bulk_area(substrate[0][:, :2]), in_area[result.particle]])
     statistics = {
-        "filling_height": height,
-        **_packing(params, result, region, height, slab, drops, len(species), positions, radii),
-        **_mixture(result, species, drops, volume, height),
+        "filling_height": heights.filling,
+        "substrate_height": heights.substrate,
+        "bulk_wall_distance": region.wall_distance,
+        **_packing(params, result, region, heights, drops, len(species), positions, radii, sphere_in_area),
+        **_mixture(result, species, drops, volume, heights),
         **_orientations(params, result, species, drops, in_bulk),
-        "radial_distribution": _radial_distribution(params, result, species, drops, region, slab),
+        "radial_distribution": _radial_distribution(params, com, diameter, region, slab),
         **_contacts(positions, radii, particle, region, in_bulk),
         "n_spheres": len(result.radii),
         "events_per_particle": float(result.event_counts.sum(axis=1).mean()),
         "largest_steps_per_particle": int(result.steps.max()),
+        "hanging_particles": int(np.isin(result.state, HANGING).sum()),
+        "particles_on_floor": _particles_on_floor(result, CONTACT_GAP_TOLERANCE * float(np.mean(radii))),
     }
     counted_spheres = int(np.sum(result.particle >= skip))
     statistics["spheres_per_second"] = (counted_spheres / result.clocked_seconds if result.clocked_seconds > 0
                                         else np.nan)
     for name, kind in EVENT_TOTALS.items():
         statistics[name] = int(result.event_counts[:, sdbd.EVENT_KINDS.index(kind)].sum())
-    for name, states in STATE_COUNTS.items():
-        statistics[name] = int(np.isin(result.state, states).sum())
     return statistics
 
 
-def measuring_region(params, geometry, result) -> Region:
-    """The horizontal box over which packing and contacts are measured."""
+def measuring_region(params, geometry, result, diameter) -> Region:
+    """The horizontal box over which packing and contacts are measured, and the bulk's area: with walls
+    ``BULK_WALL_DIAMETERS`` times the mean volume-equivalent particle ``diameter`` away from them."""
+    wall_distance = BULK_WALL_DIAMETERS * diameter
     if geometry.cylinder is not None:
-        _, _, radius, sides = geometry.cylinder
+        x, y, radius, sides = geometry.cylinder
         polygon = 0.5 * sides * radius**2 * math.sin(2.0 * math.pi / sides)
-        return Region(geometry.lower, geometry.upper, False, True, polygon / (2.0 * radius) ** 2)
-    if params["lateral"] != "none":
-        return Region(geometry.lower, geometry.upper, params["lateral"] == "periodic", True)
+        return Region(geometry.lower, geometry.upper, False, True, polygon / (2.0 * radius) ** 2, wall_distance,
+                      (x, y, radius * math.cos(math.pi / sides)))
+    if params["lateral"] == "walls":
+        return Region(geometry.lower, geometry.upper, False, True, wall_distance=wall_distance)
+    if params["lateral"] == "periodic":
+        return Region(geometry.lower, geometry.upper, True, True)
     reach = 2.0 * result.radii.max()  # so that periodic wrapping of the measurement meets no sphere twice
     return Region(result.positions[:, :2].min(axis=0) - 2.0 * reach,
-                             result.positions[:, :2].max(axis=0) + 2.0 * reach, False, False)
+                  result.positions[:, :2].max(axis=0) + 2.0 * reach, False, False)
 
 
-def _packing(params, result, region, height, slab, drops, n_species, positions, radii) -> dict:
-    """Bulk packing fraction and the profiles phi(z), phi_s(z) (substrate spheres count in phi(z))."""
+def pile_heights(com_z, volume, substrate) -> Heights:
+    """h = 2 z_cm of the particles (centres of mass ``com_z``, volumes ``volume``) and of the union of
+    the substrate's spheres (section 4.1), and z_b = h V_substrate / (V_substrate + V_particles)."""
+    if not len(substrate[1]):
+        return Heights(filling_height(com_z, volume))
+    substrate_volume, substrate_z = union_volume_and_height(*substrate)
+    height = filling_height(np.append(com_z, substrate_z), np.append(volume, substrate_volume))
+    return Heights(height, height * substrate_volume / (substrate_volume + float(volume.sum())))
+
+
+def _packing(params, result, region, heights, drops, n_species, positions, radii, sphere_in_area) -> dict:
+    """Bulk packing fraction and the profiles phi(z), phi_s(z) of the container (substrate spheres count in
+    the bulk and in phi(z)); ``sphere_in_area`` marks the spheres the bulk of a walled container counts."""
     bins = params["profile_bins"]
     if not region.measured:
         return {"bulk_packing_fraction": np.nan, "packing_profile": np.full(bins, np.nan),
                 "species_packing_profile": np.full((n_species, bins), np.nan)}
-    edges = np.linspace(0.0, PROFILE_TOP * height, bins + 1)
-    slabs = [slab, *zip(edges[:-1], edges[1:])]
+    edges = np.linspace(0.0, PROFILE_TOP * heights.filling, bins + 1)
+    slab = heights.bulk_slab()
+    # in a periodic box the bulk is a slab of the whole box: measured in the same pass as the profile
+    slabs = [slab, *zip(edges[:-1], edges[1:])] if region.periodic else list(zip(edges[:-1], edges[1:]))
 
-    def fractions(x, r):
+    def profile(x, r):
         return packing_fractions(x, r, region.lower, region.upper, slabs,
                                  samples=params["packing_samples"]) / region.inside_fraction
 
-    everything = fractions(positions, radii)
+    everything = profile(positions, radii)
+    bulk = (float(everything[0]) if region.periodic else
+            _bulk_packing_fraction(positions[sphere_in_area], radii[sphere_in_area], region, slab,
+                                   params["packing_samples"]))
     if n_species == 1 and len(positions) == len(result.positions):  # one species, no substrate: phi_s = phi
-        return {"bulk_packing_fraction": float(everything[0]), "packing_profile": everything[1:],
-                "species_packing_profile": everything[None, 1:]}
+        return {"bulk_packing_fraction": bulk, "packing_profile": everything[-bins:],
+                "species_packing_profile": everything[None, -bins:]}
     sphere_species = drops.species[result.particle]
     per_species = np.zeros((n_species, bins))
     for s in range(n_species):
         mine = sphere_species == s
         if mine.any():
-            per_species[s] = fractions(result.positions[mine], result.radii[mine])[1:]
-    return {"bulk_packing_fraction": float(everything[0]), "packing_profile": everything[1:],
+            per_species[s] = profile(result.positions[mine], result.radii[mine])[-bins:]
+    return {"bulk_packing_fraction": bulk, "packing_profile": everything[-bins:],
             "species_packing_profile": per_species}
 
 
-def _mixture(result, species, drops, volume, height) -> dict:
+def _bulk_packing_fraction(positions, radii, region, slab, samples) -> float:
+    """Packing fraction of the bulk of a walled container, box or cylinder (NaN when it has no room).
+
+    The estimator: the spheres given (those of the particles whose centre of mass lies in the bulk's
+    area, and the substrate spheres whose centre does), each with its exact volume in the slab (its
+    whole horizontal extent; overlaps within a particle counted once), over the bulk's area times
+    the slab's thickness. A sphere straddling the area's edge counts whole or not at all; for a
+    packing that is statistically uniform across the area the estimate is unbiased (the selected
+    centres are as dense as all centres: Campbell's theorem). The sum over the container's box, in
+    which every sphere lies, so that the kernel's periodic sides never wrap a sphere."""
+    area = region.bulk_area()
+    if not area > 0.0:
+        return np.nan
+    if not len(radii):
+        return 0.0
+    box_area = float(np.prod(region.upper - region.lower))
+    return packing_fraction(positions, radii, region.lower, region.upper, *slab, samples) * box_area / area
+
+
+def _mixture(result, species, drops, volume, heights) -> dict:
+    """Each species' count, volume share and mean height in the deposit, the segregation index, and the
+    volumes of the species' particles and of the mesh fits."""
     count = np.bincount(drops.species, minlength=len(species))
     species_volume = np.bincount(drops.species, weights=volume, minlength=len(species))
     weighted_z = np.bincount(drops.species, weights=volume * result.center_of_mass[:, 2], minlength=len(species))
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean_height = weighted_z / species_volume / height
+        mean_height = heights.in_deposit(weighted_z / species_volume)
     present = mean_height[count > 0]
     errors = [_mesh_error(s) for s in species]
     return {
@@ -224,6 +354,9 @@ def _mixture(result, species, drops, volume, height) -> dict:
         "species_volume_share": species_volume / species_volume.sum(),
         "species_mean_height": mean_height,
         "segregation_index": 2.0 * float(present.max() - present.min()) if len(present) > 1 else 0.0,
+        "species_volume": np.array([s.volume for s in species]),
+        "species_mesh_volume": np.array([mesh_volume(s.params) if s.params["shape"] == "mesh" else np.nan
+                                         for s in species]),
         "species_mesh_volume_error": np.array([e[0] for e in errors]),
         "species_mesh_surface_distance": np.array([e[1] for e in errors]),
     }
@@ -247,20 +380,25 @@ def _orientations(params, result, species, drops, in_bulk) -> dict:
             "orientation_density": structure.angle_distribution(axes, bins)[1]}
 
 
-def _radial_distribution(params, result, species, drops, region, slab) -> np.ndarray:
-    """g(r) on the job's shells (r over the mean volume-equivalent diameter); shells beyond half a
-    periodic box's width (minimum images) are NaN."""
-    diameters = np.array([s.equivalent_diameter for s in species])[drops.species] * drops.scale
+def _radial_distribution(params, centres, diameter, region, slab) -> np.ndarray:
+    """g(r) of the bulk's centres of mass on the job's shells (r over the mean volume-equivalent
+    ``diameter``); references lie at least r_max inside the bulk. Shells beyond half a periodic box's
+    width (minimum images) are NaN, and all are when the container has no room for a bulk."""
     bins = params["rdf_bins"]
-    width = params["rdf_range"] * float(diameters.mean()) / bins
+    width = params["rdf_range"] * diameter / bins
     usable = bins
     if region.periodic:
         usable = min(bins, int(0.5 * float(np.min(region.upper - region.lower)) / width))
     g = np.full(bins, np.nan)
-    if usable > 0:
-        g[:usable] = structure.radial_distribution(result.center_of_mass, region.lower, region.upper,
-                                                   region.periodic, *slab, usable * width, usable,
-                                                   max_references=RDF_REFERENCES)[1]
+    if usable > 0 and region.bulk_area() > 0.0:
+        r_max = usable * width
+        z = centres[:, 2]
+        in_bulk = (z >= slab[0]) & (z < slab[1]) & region.in_bulk_area(centres[:, :2])
+        reference = np.flatnonzero((z >= slab[0] + r_max) & (z < slab[1] - r_max)
+                                   & region.in_bulk_area(centres[:, :2], r_max))
+        g[:usable] = structure.region_radial_distribution(centres, in_bulk, region.bulk_area() * (slab[1] - slab[0]),
+                                                          reference, r_max, usable, region.lower, region.upper,
+                                                          region.periodic, max_references=RDF_REFERENCES)[1]
     return g
 
 
@@ -280,6 +418,13 @@ def _contacts(positions, radii, particle, region, in_bulk) -> dict:
             "n_bulk_particles": count,
             "contact_number_fraction": structure.contact_number_distribution(touched, in_bulk, MAX_CONTACT_NUMBER),
             "fabric_tensor": structure.fabric_tensor(normals[with_bulk])}
+
+
+def _particles_on_floor(result, tolerance) -> int:
+    """Particles with a sphere touching the floor, z - r <= ``tolerance``, whatever state they rest in (with
+    floor = "roll" a particle on the floor rests on three contacts, the floor one of them)."""
+    touching = result.positions[:, 2] - result.radii <= tolerance
+    return int(np.unique(result.particle[touching]).size)
 
 
 def _long_axes(result, species, drops) -> np.ndarray:
