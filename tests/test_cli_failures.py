@@ -17,7 +17,7 @@ from parsim.cli import _duration, main
 from parsim.output.folder import OutputFolder
 from parsim.job import parse_job
 from parsim.solvers import SOLVERS
-from tests.mpi import error_lines, mpiexec, run_mpi
+from tests.mpi import error_lines, run_mpi
 
 JOB = """
 name = "failing"

@@ -18,11 +18,12 @@ to or removed from the sweep, a key moved between ``[parameters]`` and ``[sweep]
 only the new ones are computed, and the dataset shows the job as written now; rows and files of
 tasks it no longer has stay.  Another name, kind, seed, unit, array of tables or fixed parameter
 value, or an input file whose content changed, is refused naming the key; input files are
-compared by content, so a file named anew keeps its tasks.  The folder's own commands (``info``,
-``collect``, ``plot``, ``export``) read the job copy with the hashes of :data:`INPUTS`, never the
-input files, so they work from any working directory and after an input file was edited or removed.  A folder whose files
-record another output schema (:data:`~parsim.output.snapshot.OUTPUT_SCHEMA`) is refused, with
-one line saying so.
+compared by content, so a file named anew keeps its tasks.  A folder whose files record another
+output schema (:data:`~parsim.output.snapshot.OUTPUT_SCHEMA`) is refused, with one line saying so.
+
+The folder's own commands (``info``, ``collect``, ``plot``, ``export``) read the job copy with the
+hashes that :data:`INPUTS` records, never the input files, so they work from any working
+directory and after an input file was edited or removed.
 """
 
 import json
@@ -209,8 +210,8 @@ def input_paths(job: Job) -> dict[str, list[str]]:
     """The input files ``job`` names, by key of :attr:`~parsim.job.Job.input_hashes` (``[[table]] key``
     for a file named in an array of tables), each path once, as written; keys naming none are left out."""
     named = {}
-    for parameter in (p for p in job.solver.parameters if p.is_file):
-        named[parameter.name] = job.sweep.get(parameter.name, [job.fixed[parameter.name]])
+    for name in (p.name for p in job.solver.parameters if p.is_file):
+        named[name] = job.sweep[name] if name in job.sweep else [job.fixed[name]]
     for table in job.solver.tables:
         for parameter in (p for p in table.parameters if p.is_file):
             named[f"[[{table.name}]] {parameter.name}"] = [entry.get(parameter.name, "")
