@@ -184,13 +184,20 @@ def _run(args) -> int:
     except Exception as error:  # noqa: BLE001 - one rank's failure must not leave the others waiting
         abort_if_alone(comm, error)  # ends every rank; returns on a single rank, where the traceback says it
         raise
-    if comm.Get_rank() > 0:
-        return 0 if complete else EXIT_UNFINISHED
+    return _outcome(path, complete, speaks=comm.Get_rank() == 0)
+
+
+def _outcome(path: Path | None, complete: bool, speaks: bool) -> int:
+    """The status of a run that ended (rank 0 ``speaks``: says where its dataset is): 0 when every task has
+    finished, else EXIT_UNFINISHED with ``path`` the partial dataset (None if no task has finished)."""
     if complete:
-        print(f"dataset: {path}")
+        if speaks:
+            print(f"dataset: {path}")
         return 0
-    kept = f"partial dataset: {path}" if path else "no task has finished"
-    print(f"parsim: --time-limit reached with tasks left ({kept}); run the same command to continue", file=sys.stderr)
+    if speaks:
+        kept = f"partial dataset: {path}" if path else "no task has finished"
+        print(f"parsim: --time-limit reached with tasks left ({kept}); run the same command to continue",
+              file=sys.stderr)
     return EXIT_UNFINISHED
 
 

@@ -62,6 +62,12 @@ def describe_exception(error: BaseException) -> str:
     return "".join(traceback.format_exception(error)).rstrip()
 
 
+def first_sentence(error: BaseException) -> str:
+    """The first sentence of ``error``'s message (or its type's name), for a one-line report of a
+    library's error whose message goes on for lines (xarray's, netCDF's)."""
+    return str(error).strip().split("\n", 1)[0].split(". ", 1)[0] or type(error).__name__
+
+
 def exit_status(error: Exception) -> int:
     """The command line's exit status for ``error``: a job that cannot run, or a failed run."""
     return EXIT_USER_ERROR if isinstance(error, JobError) else EXIT_RUN_FAILED

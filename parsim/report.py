@@ -4,6 +4,7 @@ from pathlib import Path
 
 import xarray as xr
 
+from parsim.errors import OutputError, first_sentence
 from parsim.output.folder import open_output
 
 
@@ -25,13 +26,25 @@ def describe_output(root: Path) -> str:
         lines.append(f"  kept: {len(rows) - done} finished tasks of values or realisations the job no longer has "
                      "(back in the dataset if the job is grown to them again)")
     if folder.dataset.exists():
-        with xr.open_dataset(folder.dataset) as dataset:
-            lines.append(f"dataset {folder.dataset} (written {dataset.attrs.get('date_created', '?')} "
-                         f"on {dataset.attrs.get('mpi_size', '?')} ranks):")
-            lines.append("  dimensions: " + ", ".join(f"{d}={n}" for d, n in dataset.sizes.items()))
-            for name, variable in dataset.data_vars.items():
-                lines.append(f"  {name}({', '.join(variable.dims)}) [{variable.attrs.get('units', '')}]: "
-                             f"{variable.attrs.get('long_name', '')}")
+        lines += _dataset_lines(folder.dataset)
     else:
         lines.append("dataset: not yet written (it is written when every task has finished)")
     return "\n".join(lines)
+
+
+def _dataset_lines(path: Path) -> list[str]:
+    """What the dataset at ``path`` holds; a damaged one is an :class:`OutputError` naming it."""
+    try:
+        with xr.open_dataset(path) as dataset:
+            if not dataset.attrs:  # a file cut off at its header opens as an empty dataset
+                raise ValueError("it holds no attributes, as every dataset of a job does")
+            lines = [f"dataset {path} (written {dataset.attrs.get('date_created', '?')} "
+                     f"on {dataset.attrs.get('mpi_size', '?')} ranks):",
+                     "  dimensions: " + ", ".join(f"{d}={n}" for d, n in dataset.sizes.items())]
+            for name, variable in dataset.data_vars.items():
+                lines.append(f"  {name}({', '.join(variable.dims)}) [{variable.attrs.get('units', '')}]: "
+                             f"{variable.attrs.get('long_name', '')}")
+    except (OSError, ValueError) as error:  # cut off or overwritten: the rows still hold every statistic
+        raise OutputError(f"cannot read the dataset {path}: {first_sentence(error)}; remove it: parsim run of "
+                          "the job writes it again from the folder's rows, computing nothing") from None
+    return lines

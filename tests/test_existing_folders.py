@@ -166,3 +166,13 @@ def test_a_damaged_task_file_says_what_removing_it_does(computed, tmp_path, caps
     result = run_serial("run", "job.toml", "--quiet", cwd=copy)
     assert result.returncode == 0, result.stderr
     assert not damaged.exists()  # its configuration is not computed again in this folder
+
+
+def test_a_damaged_dataset_is_one_line(computed, tmp_path, capsys):
+    copy = tmp_path / "project"
+    shutil.copytree(computed, copy)
+    dataset = copy / "out" / "flakes.nc"
+    dataset.write_bytes(b"CDF\x01 cut off")
+    assert main(["info", str(copy / "out")]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"parsim: error: cannot read the dataset {dataset}: ")

@@ -319,3 +319,13 @@ def test_plot_of_a_file_that_is_no_dataset_is_one_line(deposition_output, tmp_pa
     (line,) = capsys.readouterr().err.splitlines()
     assert line.startswith(f"parsim: error: cannot read {path} as a netCDF dataset: ") or line.startswith(
         f"parsim: error: {path} is not the dataset of a parsim job (it has no attribute job_kind)"), line
+
+
+def test_plot_of_a_text_file_in_a_terminal(tmp_path):
+    path = tmp_path / "notes.nc"
+    path.write_text("not a dataset\n")
+    result = subprocess.run([sys.executable, "-m", "parsim", "plot", str(path)], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 2
+    (line,) = result.stderr.splitlines()
+    assert line.startswith(f"parsim: error: cannot read {path} as a netCDF dataset: ")

@@ -13,7 +13,7 @@ from typing import Callable
 import numpy as np
 import xarray as xr
 
-from parsim.errors import PlotError
+from parsim.errors import PlotError, first_sentence
 from parsim.output.collect import COMPLETED
 from parsim.output.dataset import check_dataset_schema
 from parsim.output.folder import JOB_COPY, TASKS, open_output, task_files
@@ -95,8 +95,7 @@ def _open(path: Path) -> xr.Dataset:
         with xr.open_dataset(path) as dataset:
             dataset = dataset.load()
     except (OSError, ValueError) as error:  # not netCDF (a text, an image, an empty file), or damaged
-        reason = str(error).strip().split("\n", 1)[0].split(". ", 1)[0] or type(error).__name__
-        raise PlotError(f"cannot read {path} as a netCDF dataset: {reason}") from None
+        raise PlotError(f"cannot read {path} as a netCDF dataset: {first_sentence(error)}") from None
     if JOB_KIND not in dataset.attrs:  # another netCDF or HDF5 file, a task file
         raise PlotError(f"{path} is not the dataset of a parsim job (it has no attribute {JOB_KIND}): give a job's "
                         "NAME.nc or NAME.partial.nc, or its output folder")
