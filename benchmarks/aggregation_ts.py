@@ -15,7 +15,7 @@ exponents of wall and CPU time vs N over N >= 1000, of CPU time over N >= 10^4, 
 exponent between the two largest N, next to the paper's TS exponents.  Below about 10^4 a TS
 run costs mostly per time step (0.05 s at N = 100, 0.2 s at 2500), which flattens a fit that
 reaches down there: at V_f 0.3 the fit over 2500 ... 10^6 gives 1.25, over 10^4 ... 10^6 1.32
-(docs/benchmarks.md, measured 2026-11-24).
+(docs/benchmarks.md, measured 2026-11-23).
 Once a run of a (method, V_f) takes longer than --max-seconds, its larger N are skipped.
 
     python benchmarks/aggregation_ts.py [--sizes 100 400 1600] [--fractions 0.2] [--methods ts ed]
