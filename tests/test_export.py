@@ -28,6 +28,7 @@ from parsim.agglomerate_file import read_agglomerate
 from parsim.errors import JobError
 from parsim.core.sdbd.rotation import quat_to_matrix
 from parsim.output.export import FORMATS, add_export_command, export_output, run_export
+from parsim.solvers.deposition import PARAMETERS as DEPOSITION_PARAMETERS
 from parsim.solvers.deposition_materials import particle_shape
 from tests.datasets import run_serial
 
@@ -299,8 +300,8 @@ def test_particle_table_and_shapes_rebuild_the_sediment(outputs, tmp_path):
     close(np.column_stack([particles[f"q{axis}"] for axis in "wxyz"]), arrays["particles/rotation"])
     close(particles["scale"], arrays["particles/scale"])
     assert np.array_equal(particles["shape"], arrays["particles/shape"])
-    # the templates are the solver's shape for the task's parameters (its root attributes)
-    offsets, radii, _ = particle_shape(expected.attrs)
+    # the templates are the solver's shape for the task's parameters (its root attributes hold those it reads)
+    offsets, radii, _ = particle_shape({**{p.name: p.default for p in DEPOSITION_PARAMETERS}, **expected.attrs})
     close(np.column_stack([templates[axis] for axis in ("dx", "dy", "dz")]), offsets)
     close(templates["r"], radii)
     # every sphere is centre + R(q) scale offset, radius scale r, in the task file's order
