@@ -42,8 +42,8 @@ from parsim.solver import LENGTH_UNITS, Coordinate, Statistic, coded_coordinate
 from parsim.solvers.deposition_materials import mesh_approximation, mesh_volume
 
 BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the deposit, z_b + BULK_SLAB (h - z_b), away from floor and surface
-# With walls the bulk keeps this many mean volume-equivalent particle diameters from them: the distance at
-# which benchmarks/wall_packing.py finds the packing of spheres as in a periodic box.
+# With walls the bulk keeps this many mean volume-equivalent particle diameters from them: there
+# benchmarks/wall_packing.py finds sphere packings within 0.002 of the periodic box's.
 BULK_WALL_DIAMETERS = 4.0
 PROFILE_TOP = 1.25  # the profile phi(z) covers 0 <= z <= PROFILE_TOP x filling height
 RDF_REFERENCES = 2000  # g(r) from at most this many reference centres (noise ~ 1/sqrt of it per shell)
