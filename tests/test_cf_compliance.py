@@ -159,7 +159,7 @@ def test_every_unit_a_job_may_name_is_udunits_of_its_quantity():
 
 def test_every_declared_unit_is_udunits_of_its_quantity():
     """Every unit of every solver's declarations, in the defaults and in other units, parses and has its dimension."""
-    dimension_of = {"{length}": "m", "{time}": "s", "{mass}": "kg", "{length} {time}-1": "m s-1"}
+    dimension_of = {"{length}": "m", "{time}": "s", "{mass}": "kg", "{length} {time}-1": "m s-1", "{length}3": "m3"}
     job_units = [{"length": "m", "time": "s", "mass": "kg"}, {"length": "um", "time": "h", "mass": "mg"}]
     for solver in SOLVERS.values():
         declared = [(p.name, p.units) for p in solver.parameters] + [(s.name, s.units) for s in all_statistics(solver)]

@@ -118,7 +118,8 @@ def test_agglomerates_from_an_aggregation_task(tmp_path):
     shutil.copy(other, cluster)
     resumed = run_serial("run", str(deposition), "--output", str(tmp_path / "flakes"), "--quiet")
     assert resumed.returncode == 2, resumed.stderr
-    assert f"holds results computed from a different agglomerate_file '{cluster}'" in resumed.stderr
+    assert "holds results of a different job, which differs in: [parameters] agglomerate_file " \
+           f"('{cluster}' (sha256" in resumed.stderr
 
 
 @pytest.mark.parametrize("change, message", [

@@ -141,8 +141,8 @@ def test_substrate_from_an_earlier_task(tmp_path):
 
 
 def test_cylinder_holds_every_sphere():
-    radius = 4.0
-    outcome = parsim.deposit(250, seed=4, container="cylinder", container_radius=radius,
+    radius = 6.0  # room for a bulk 4 particle diameters from the wall
+    outcome = parsim.deposit(600, seed=4, container="cylinder", container_radius=radius,
                              size_distribution="uniform", size_spread=0.3, packing_samples=1000)
     arrays = outcome.configuration.arrays
     distance = np.hypot(arrays["spheres/position"][:, 0] - radius, arrays["spheres/position"][:, 1] - radius)

@@ -50,12 +50,17 @@ RDF_REFERENCES = 2000  # g(r) from at most this many reference centres (noise ~ 
 MAX_CONTACT_NUMBER = 24  # the distribution of contact numbers counts 0 ... this
 AXES = ("x", "y", "z")
 
+# Upper bounds: g(r)'s search grows as rdf_range^3 (at 25 diameters, 10^4 neighbours per reference centre),
+# and a distribution of more than 10^4 bins resolves nothing a sediment has
+MAX_RDF_RANGE = 25.0
+MAX_BINS = 10_000
+
 PARAMETERS = (
     Parameter("rdf_range", float, 4.0, "1", "g(r) covers 0 < r <= rdf_range mean volume-equivalent diameters",
-              low=0.0, low_inclusive=False, sweepable=False),
-    Parameter("rdf_bins", int, 80, "1", "number of shells of g(r)", low=1, sweepable=False),
+              low=0.0, low_inclusive=False, high=MAX_RDF_RANGE, sweepable=False),
+    Parameter("rdf_bins", int, 80, "1", "number of shells of g(r)", low=1, high=MAX_BINS, sweepable=False),
     Parameter("orientation_bins", int, 18, "1", "number of bins of the angle of the long axes to the vertical "
-              "over [0, 90] degrees", low=1, sweepable=False),
+              "over [0, 90] degrees", low=1, high=MAX_BINS, sweepable=False),
 )
 
 STATISTICS = (
