@@ -22,7 +22,7 @@ from parsim.solver import Configuration, TaskResult
 
 STATISTICS_GROUP = "statistics"
 
-OUTPUT_SCHEMA = 4
+OUTPUT_SCHEMA = 5
 """Version of the layout of the outputs (task files and dataset), recorded in both.
 
 Raise it with any change that would make parsim misread the outputs of an earlier
@@ -30,7 +30,9 @@ version, e.g. a statistic added, a coordinate coded differently, or a parameter'
 changed (a point's key and stream leave parameters at their default out).  Schema 2 (parsim
 0.2.0): UDUNITS units, a numeric ``component``, the schema and version recorded.  Schema 3
 (parsim 0.3.0): the deposition's species, structure and substrate outputs.  Schema 4 (parsim 0.4.0):
-random streams and task files named by the values of a task's point, statistics in row files.
+random streams and task files named by the values of a task's point, statistics in row files.  Schema 5
+(parsim 0.5.0): deposition heights that count the substrate, a bulk away from walls, every floor-touching
+particle counted, the species' volumes; task files record the parameters their task reads.
 """
 SCHEMA_ATTRIBUTE = "parsim_output_schema"
 VERSION_ATTRIBUTE = "parsim_version"
