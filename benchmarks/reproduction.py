@@ -55,12 +55,19 @@ def strings(coordinate: xr.DataArray) -> list[str]:
     return [str(value) for value in coordinate.values.tolist()]
 
 
+def per_shape(ds: xr.Dataset):
+    """(shape name, the dataset at that shape) for each swept shape, or the one fixed shape."""
+    if "shape" not in ds.dims:
+        yield str(ds["shape"].values), ds
+        return
+    for index, name in enumerate(strings(ds["shape"])):
+        yield name, ds.isel(shape=index)
+
+
 def filling_height(ds: xr.Dataset) -> None:
     print(f"filling height h = 2 z_cm against the trial angle (Topić & Pöschel 2016, Fig. 8), "
           f"{ds.sizes[REALIZATION]} packings per point, seed {ds.attrs.get('job_seed')}")
-    shapes = ds["shape"] if "shape" in ds.dims else None
-    for index, name in enumerate(strings(shapes) if shapes is not None else [str(ds["shape"].values)]):
-        part = ds.isel(shape=index) if shapes is not None else ds
+    for name, part in per_shape(ds):
         mean, error = mean_and_error(part.filling_height)
         angles = part["trial_angle"].values
         print(f"  {name}:")
@@ -79,9 +86,7 @@ def filling_height(ds: xr.Dataset) -> None:
 def efficiency(ds: xr.Dataset) -> None:
     print(f"spheres deposited per second against L (Topić & Pöschel 2016, Fig. 12; a timing), "
           f"{ds.sizes[REALIZATION]} realisations per point")
-    shapes = ds["shape"] if "shape" in ds.dims else None
-    for index, name in enumerate(strings(shapes) if shapes is not None else [str(ds["shape"].values)]):
-        part = ds.isel(shape=index) if shapes is not None else ds
+    for name, part in per_shape(ds):
         mean = part.spheres_per_second.mean(REALIZATION)
         sizes = part["shape_size"].values
         rates = ", ".join(f"L={size}: {rate:.0f}" for size, rate in zip(sizes, mean.values))
