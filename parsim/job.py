@@ -233,6 +233,11 @@ class Job:
         return f"sha256:{self.input_hashes[key][path]}" if path else ""
 
     @property
+    def input_paths(self) -> dict[str, list[str]]:
+        """The input files the job names, by key of :attr:`input_hashes` (:func:`named_input_files`)."""
+        return named_input_files(self.solver, self.fixed, self.sweep, self.tables)
+
+    @property
     def input_attributes(self) -> dict[str, str]:
         """The input files and their hashes as attributes of the dataset and task files.
 
@@ -474,8 +479,14 @@ def _table_entries(document: dict, table: TableArray, source: str, fail) -> tupl
 
 
 def _input_hashes(solver: Solver, fixed: dict, sweep: dict, tables: dict, fail) -> dict[str, dict[str, str]]:
-    """The SHA-256 of every file the job names, by parameter and path (an empty path names no file);
-    a file named in an array of tables is listed under ``[[table]] key``."""
+    """The SHA-256 of every file the job names, by key of :func:`named_input_files` and path."""
+    return {key: {path: _sha256(key, path, fail) for path in paths}
+            for key, paths in named_input_files(solver, fixed, sweep, tables).items()}
+
+
+def named_input_files(solver: Solver, fixed: dict, sweep: dict, tables: dict) -> dict[str, list[str]]:
+    """The input files a job names, by parameter (``[[table]] key`` for a file named in an array of
+    tables), each path once, as written; keys naming none (only empty paths) are left out."""
     named = {}
     for parameter in (p for p in solver.parameters if p.is_file):
         named[parameter.name] = sweep[parameter.name] if parameter.name in sweep else [fixed[parameter.name]]
@@ -483,12 +494,8 @@ def _input_hashes(solver: Solver, fixed: dict, sweep: dict, tables: dict, fail) 
         for parameter in (p for p in table.parameters if p.is_file):
             named[f"[[{table.name}]] {parameter.name}"] = [entry.get(parameter.name, "")
                                                            for entry in tables.get(table.name, ())]
-    hashes = {}
-    for key, values in named.items():
-        paths = [path for path in dict.fromkeys(values) if path]
-        if paths:
-            hashes[key] = {path: _sha256(key, path, fail) for path in paths}
-    return hashes
+    paths = {key: [path for path in dict.fromkeys(values) if path] for key, values in named.items()}
+    return {key: listed for key, listed in paths.items() if listed}
 
 
 def _sha256(key: str, path: str, fail) -> str:

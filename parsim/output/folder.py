@@ -143,13 +143,13 @@ class OutputFolder:
     def _inputs_named_by(self, job: Job, recorded: dict[str, dict[str, str]]) -> dict[str, dict[str, str]]:
         """The recorded hashes of the input files ``job`` names, by key and path as written."""
         named = {key: {path: recorded[key][path] for path in paths if path in recorded.get(key, {})}
-                 for key, paths in input_paths(job).items()}
+                 for key, paths in job.input_paths.items()}
         return {key: files for key, files in named.items() if files}
 
     def check_inputs_recorded(self, job: Job) -> None:
         """Refuse a stored ``job`` naming an input file whose hash :attr:`inputs` does not record:
         its tasks cannot be told apart without it."""
-        for key, paths in input_paths(job).items():
+        for key, paths in job.input_paths.items():
             for path in paths:
                 if path not in job.input_hashes.get(key, {}):
                     raise JobError(f"output folder {self.root}: {self.inputs} records no hash of {key} {path!r}, "
@@ -204,20 +204,6 @@ def _is_input_record(recorded: Any) -> bool:
         isinstance(files, dict) and all(isinstance(path, str) and isinstance(digest, str)
                                         for path, digest in files.items())
         for files in recorded.values())
-
-
-def input_paths(job: Job) -> dict[str, list[str]]:
-    """The input files ``job`` names, by key of :attr:`~parsim.job.Job.input_hashes` (``[[table]] key``
-    for a file named in an array of tables), each path once, as written; keys naming none are left out."""
-    named = {}
-    for name in (p.name for p in job.solver.parameters if p.is_file):
-        named[name] = job.sweep[name] if name in job.sweep else [job.fixed[name]]
-    for table in job.solver.tables:
-        for parameter in (p for p in table.parameters if p.is_file):
-            named[f"[[{table.name}]] {parameter.name}"] = [entry.get(parameter.name, "")
-                                                           for entry in job.tables.get(table.name, ())]
-    paths = {key: [path for path in dict.fromkeys(values) if path] for key, values in named.items()}
-    return {key: listed for key, listed in paths.items() if listed}
 
 
 def open_output(root: Path) -> tuple[OutputFolder, Job]:
