@@ -8,10 +8,11 @@ from parsim.core.sediment import (
     filling_height,
     packing_fraction,
     packing_fraction_profile,
+    packing_fractions,
     union_volume_and_height,
 )
 from parsim.core.shapes.union import centre_of_mass_of_union
-from parsim.core.structure import coordination
+from parsim.core.structure import contact_network, coordination
 
 
 def simple_cubic(n, layers, radius):
@@ -141,3 +142,35 @@ def test_union_of_spheres_apart_is_their_sum():
     sphere = 4.0 / 3.0 * np.pi * radii**3
     assert volume == pytest.approx(sphere.sum(), rel=1e-14)
     assert height == pytest.approx(np.dot(sphere, centres[:, 2]) / sphere.sum(), rel=1e-14)
+
+
+def test_spheres_flagged_as_not_overlapping_need_no_overlap_search():
+    """A lattice of randomly turned rods (spheres 1 radius apart: pairwise lenses, some cut by the slabs'
+    edges; 0.3 radii apart: three spheres overlap, sampled) and lone spheres: the packing fractions with the
+    overlap flags of the contact search are those of the search over every sphere, to the last bit, for all
+    the spheres and for a subset of them."""
+    rng = np.random.default_rng(11)
+    radius, spacing = 0.5, 2.2
+    sites = (np.stack(np.meshgrid(*[np.arange(5)] * 3, indexing="ij"), axis=-1).reshape(-1, 3) + 0.5) * spacing
+    x, radii, particle = [], [], []
+    for p, site in enumerate(sites):
+        kind = p % 3  # a lone sphere, a rod of pairwise overlaps, a rod of triple overlaps
+        axis = rng.standard_normal(3)
+        steps = [0.0] if kind == 0 else np.array([-1.0, 0.0, 1.0]) * (1.0 if kind == 1 else 0.3) * radius
+        x.extend(site + step * axis / np.linalg.norm(axis) for step in steps)
+        radii.extend([radius] * len(steps))
+        particle.extend([p] * len(steps))
+    x, radii, particle = np.array(x), np.array(radii), np.array(particle)
+    side = 5 * spacing
+    flags = contact_network(x, radii, particle, (0, 0), (side, side), True).overlapping
+    np.testing.assert_array_equal(flags, np.isin(particle, np.flatnonzero(np.arange(len(sites)) % 3 > 0)))
+    edges = np.linspace(0.0, side, 23)
+    slabs = np.column_stack([edges[:-1], edges[1:]])
+    everything = packing_fractions(x, radii, (0, 0), (side, side), slabs, samples=4000)
+    assert np.all(everything > 0.0)
+    np.testing.assert_array_equal(packing_fractions(x, radii, (0, 0), (side, side), slabs, samples=4000,
+                                                    overlapping=flags), everything)
+    part = x[:, 0] < 0.5 * side
+    np.testing.assert_array_equal(packing_fractions(x[part], radii[part], (0, 0), (side, side), slabs, samples=4000,
+                                                    overlapping=flags[part]),
+                                  packing_fractions(x[part], radii[part], (0, 0), (side, side), slabs, samples=4000))

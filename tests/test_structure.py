@@ -5,7 +5,8 @@ import pytest
 
 from parsim.core.sdbd.rotation import quat_to_matrix
 from parsim.core.shapes.simple import cube, rod, sphere, spiky
-from parsim.core.structure import (angle_distribution, contact_number_distribution, contact_pairs,
+from parsim.core.sediment import CONTACT_GAP_TOLERANCE
+from parsim.core.structure import (angle_distribution, contact_network, contact_number_distribution, contact_pairs,
                                    contacts_per_particle, coordination, fabric_anisotropy, fabric_tensor, lab_axes, long_axis,
                                    nematic_order, radial_distribution, rotation_matrices, vertical_order)
 
@@ -179,3 +180,84 @@ def test_rotation_matrices_turn_body_into_lab_vectors():
         np.testing.assert_allclose(matrix, expected, atol=1e-15)
     np.testing.assert_allclose(matrices @ matrices.transpose(0, 2, 1), np.broadcast_to(np.eye(3), (5, 3, 3)),
                                atol=1e-14)
+
+
+def every_contact(x, radii, particle, width, periodic):
+    """The contacts of contact_pairs found by checking every pair of spheres: (pairs, normals)."""
+    tolerance = CONTACT_GAP_TOLERANCE * radii.mean()
+    pairs, normals = [], []
+    for i in range(len(x)):
+        for j in range(i + 1, len(x)):
+            d = x[j] - x[i]
+            if periodic:
+                d[:2] -= width * np.floor(d[:2] / width + 0.5)
+            distance = np.sqrt(d @ d)
+            if particle[i] != particle[j] and distance - radii[i] - radii[j] < tolerance:
+                pairs.append((i, j))
+                normals.append(d / distance)
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(normals).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("cells, periodic", [(2, True), (3, True), (4, False)])
+def test_contacts_are_those_of_every_pair_checked_directly(cells, periodic):
+    """An FCC packing of touching spheres, shuffled, some spheres shrunk so that their contacts open and some
+    neighbours glued into one particle: the contacts, their order and normals are those of the direct check
+    of every pair, also in a box only two lattice cells wide."""
+    rng = np.random.default_rng(5)
+    radius = 0.5
+    a = 2.0 * np.sqrt(2.0) * radius
+    basis = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
+    i, j, k = np.meshgrid(np.arange(cells), np.arange(cells), np.arange(4), indexing="ij")
+    x = (a * (np.column_stack([i.ravel(), j.ravel(), k.ravel()])[:, None, :] + basis).reshape(-1, 3)
+         + [0.1, 0.2, radius])
+    x = x[rng.permutation(len(x))]
+    radii = np.where(rng.random(len(x)) < 0.2, radius - 1e-4, radius)
+    particle = np.arange(len(x))
+    particle[1::7] = particle[0::7][:len(particle[1::7])]  # some spheres share a particle with another
+    width = np.full(2, a * cells)
+    pairs, normals = contact_pairs(x, radii, particle, (0, 0), tuple(width), periodic)
+    expected_pairs, expected_normals = every_contact(x, radii, particle, width, periodic)
+    assert len(pairs) > 2 * len(x)
+    np.testing.assert_array_equal(pairs, expected_pairs)
+    np.testing.assert_allclose(normals, expected_normals, rtol=0, atol=1e-14)
+
+
+def test_spheres_that_overlap_are_flagged_whichever_particle_they_belong_to():
+    """Rods of overlapping spheres, two spheres of different particles overlapping by 1e-3 of a radius, two
+    overlapping across the box's side (flagged although the contacts are not periodic), two touching to
+    round-off and lone spheres: exactly the overlapping spheres are flagged."""
+    offsets, rod_radii = rod(3)  # spheres 1 radius apart
+    rods = np.concatenate([[2.0, 2.0, 1.0] + offsets, [2.0, 6.0, 1.0] + offsets])
+    x = np.concatenate([rods, [[7.0, 2.0, 1.0], [7.999, 2.0, 1.0],  # overlapping by 1e-3
+                               [0.3, 8.0, 1.0], [9.5, 8.0, 1.0],  # 0.8 apart across the side x = 0 = 10
+                               [5.0, 9.0, 3.0], [6.0, 9.0, 3.0],  # touching
+                               [5.0, 5.0, 6.0], [2.0, 8.0, 6.0]]])
+    radii = np.concatenate([rod_radii, rod_radii, np.full(8, 0.5)])
+    particle = np.concatenate([[0, 0, 0, 1, 1, 1], np.arange(2, 10)])
+    network = contact_network(x, radii, particle, (0, 0), (10, 10), False)
+    np.testing.assert_array_equal(network.overlapping, [True] * 6 + [True, True, True, True] + [False] * 4)
+    np.testing.assert_array_equal(network.pairs, [[6, 7], [10, 11]])  # the side is no contact without periodic sides
+
+
+@pytest.mark.parametrize("side, periodic", [(6.0, True), (13.0, True), (13.0, False)])
+def test_shell_counts_are_those_of_every_pair_counted_directly(side, periodic):
+    """Random points: g(r) holds the distances from each reference to every other centre, also when r_max is
+    half the periodic box's width (fewer columns of cells fit across it than a reference scans)."""
+    height, r_max, bins = 12.0, 3.0, 12
+    x = np.random.default_rng(2).uniform([0, 0, 0], [side, side, height], size=(int(0.8 * side**2 * height), 3))
+    r, g, n_ref = radial_distribution(x, (0, 0), (side, side), periodic, 0.0, height, r_max, bins)
+    reference = (x[:, 2] >= r_max) & (x[:, 2] < height - r_max)
+    if not periodic:
+        reference &= np.all((x[:, :2] >= r_max) & (x[:, :2] <= side - r_max), axis=1)
+    counts = np.zeros(bins)
+    for i in np.flatnonzero(reference):
+        d = np.delete(x, i, axis=0) - x[i]
+        if periodic:
+            d[:, :2] -= side * np.floor(d[:, :2] / side + 0.5)
+        distance = np.sqrt(np.sum(d * d, axis=1))
+        counts += np.bincount(np.minimum((distance[distance < r_max] / r_max * bins).astype(int), bins - 1),
+                              minlength=bins)
+    edges = np.linspace(0.0, r_max, bins + 1)
+    shell = 4.0 / 3.0 * np.pi * (edges[1:] ** 3 - edges[:-1] ** 3)
+    assert n_ref == np.count_nonzero(reference) > 0
+    np.testing.assert_allclose(g * n_ref * len(x) / (side**2 * height) * shell, counts, rtol=1e-12)

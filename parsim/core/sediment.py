@@ -118,9 +118,12 @@ def _lens_volume_and_centroid(r_i, r_j, d):
     return volume, (cap_i * centroid_i + cap_j * centroid_j) / volume
 
 
-def packing_fraction(positions, radii, box_lower_xy, box_upper_xy, z_low, z_high, samples=DEFAULT_SAMPLES):
-    """Fraction of the slab box × [z_low, z_high) covered by the union of the spheres."""
-    return float(packing_fractions(positions, radii, box_lower_xy, box_upper_xy, [(z_low, z_high)], samples)[0])
+def packing_fraction(positions, radii, box_lower_xy, box_upper_xy, z_low, z_high, samples=DEFAULT_SAMPLES,
+                     overlapping=None):
+    """Fraction of the slab box × [z_low, z_high) covered by the union of the spheres (``overlapping``: see
+    :func:`packing_fractions`)."""
+    return float(packing_fractions(positions, radii, box_lower_xy, box_upper_xy, [(z_low, z_high)], samples,
+                                   overlapping)[0])
 
 
 def packing_fraction_profile(positions, radii, box_lower_xy, box_upper_xy, z_edges, samples=DEFAULT_SAMPLES):
@@ -130,33 +133,60 @@ def packing_fraction_profile(positions, radii, box_lower_xy, box_upper_xy, z_edg
                              samples)
 
 
-def packing_fractions(positions, radii, box_lower_xy, box_upper_xy, slabs, samples=DEFAULT_SAMPLES):
+def packing_fractions(positions, radii, box_lower_xy, box_upper_xy, slabs, samples=DEFAULT_SAMPLES,
+                      overlapping=None):
     """Covered fraction of each slab box × [z_low, z_high) of ``slabs`` (rows (z_low, z_high), may overlap).
 
     All slabs are measured in one pass over the spheres, on the slabs between their sorted edges.
+    ``overlapping`` (optional, one flag per sphere): True for every sphere that may overlap another
+    by more than the overlap tolerance (minimum images across the box's sides); the others are known
+    to overlap none, e.g. from :func:`parsim.core.structure.contact_network`, and skip the search for
+    overlaps. The result is the same as without it, which searches every sphere.
     """
     slabs = np.asarray(slabs, dtype=np.float64).reshape(-1, 2)
     if len(slabs) == 0 or not np.all(slabs[:, 1] > slabs[:, 0]):
         raise ValueError(f"need z_high > z_low in every slab, got {slabs.tolist()}")
     edges = np.unique(slabs)
     covered = np.concatenate([[0.0], np.cumsum(_covered_volumes(positions, radii, box_lower_xy, box_upper_xy, edges,
-                                                                samples * len(slabs)))])
+                                                                samples * len(slabs), overlapping))])
     low, high = np.searchsorted(edges, slabs[:, 0]), np.searchsorted(edges, slabs[:, 1])
     area = float(np.prod(np.asarray(box_upper_xy, dtype=np.float64) - np.asarray(box_lower_xy, dtype=np.float64)))
     return (covered[high] - covered[low]) / (area * (slabs[:, 1] - slabs[:, 0]))
 
 
-def _covered_volumes(positions, radii, box_lower_xy, box_upper_xy, edges, budget):
+def _covered_volumes(positions, radii, box_lower_xy, box_upper_xy, edges, budget, overlapping=None):
     """Volume of the union of the spheres in each slab between consecutive ``edges``: exact sphere volumes
     minus the overlap excess, which is exact for pairwise caps and sampled with about ``budget`` points otherwise.
+
+    Spheres are summed in the order of the cell grid. The overlaps are searched among the spheres
+    flagged ``overlapping`` (all without flags), kept in that order on the same cells: the spheres
+    left out have no overlap, so the overlap lists, their row numbers (which shift the sample points)
+    and the sums over them are those of the search over all spheres.
     """
     grid = _SphereGrid(positions, radii, box_lower_xy, box_upper_xy)
     if len(grid.radii) == 0:
         return np.zeros(len(edges) - 1)
-    centres, radii, _, start, lower, upper, _, _, cells = grid.arrays()
-    volume = _sphere_slab_volumes(centres, radii, edges)
-    tolerance = OVERLAP_TOLERANCE * float(np.mean(radii))
+    volume = _sphere_slab_volumes(grid.positions, grid.radii, grid.order, edges)
+    # the mean radius in the grid's order: the tolerance (and its last bit) of the search over every sphere
+    tolerance = OVERLAP_TOLERANCE * float(np.mean(grid.radii[grid.order]))
+    excess = np.zeros(len(edges) - 1)
+    if overlapping is None:
+        centres, radii, _, start, lower, upper, _, _, cells = grid.arrays()
+    else:
+        kept = np.asarray(overlapping, dtype=bool)
+        if kept.shape != grid.radii.shape:
+            raise ValueError("overlapping must hold one flag per sphere")
+        kept_sorted = kept[grid.order]
+        if not kept_sorted.any():
+            return volume - excess
+        chosen = grid.order[kept_sorted]
+        centres, radii = grid.positions[chosen], grid.radii[chosen]
+        # cell c holds the chosen spheres start[c]:start[c + 1] of the grid's order
+        start = np.concatenate([[0], np.cumsum(kept_sorted)])[grid.start]
+        lower, upper, cells = grid.lower, grid.upper, grid.cells
     first, neighbour, offset = _overlap_lists(centres, radii, tolerance, start, lower, upper, cells)
+    if not len(neighbour):
+        return volume - excess
     axis, plane, distance = _caps(radii, first, neighbour, offset)
     excess, kind = _classify_caps(centres, radii, first, neighbour, offset, axis, plane, distance, edges)
     sampled = int(np.count_nonzero(kind))
@@ -171,10 +201,13 @@ def _covered_volumes(positions, radii, box_lower_xy, box_upper_xy, edges, budget
 class _SphereGrid:
     """Spheres binned in cubic cells (side >= the largest diameter), periodic in x and y.
 
-    Cells are 3D, so a query costs the same at any depth of the pile.
+    Cells are 3D, so a query costs the same at any depth of the pile. Cell (i, j, k) (x, y, z) is
+    numbered (i cells[1] + j) cells[2] + k, the cells of a column consecutive; with ``layers_first``
+    (k cells[0] + i) cells[1] + j, the cells of a horizontal layer consecutive, so that a pass in cell
+    order meets the spheres of a sediment about in the order they were deposited.
     """
 
-    def __init__(self, positions, radii, box_lower_xy, box_upper_xy):
+    def __init__(self, positions, radii, box_lower_xy, box_upper_xy, layers_first=False):
         self.positions = np.ascontiguousarray(positions, dtype=np.float64)
         self.radii = np.ascontiguousarray(radii, dtype=np.float64)
         if self.positions.ndim != 2 or self.positions.shape[1] != 3 or self.radii.shape != (len(self.positions),):
@@ -188,19 +221,46 @@ class _SphereGrid:
         self.cells = np.array([*np.maximum(np.floor(width / reach), 1), np.floor((z.max() - self.z_lower) / reach) + 1],
                               dtype=np.int64)
         self.cell_height = reach
-        cell = _cell_index(self.positions, self.lower, width, self.z_lower, reach, self.cells)
-        self.order = np.argsort(cell, kind="stable")
-        self.start = np.searchsorted(cell[self.order], np.arange(np.prod(self.cells) + 1))
+        # order: the spheres by cell, in index order within a cell; start: cell c holds order[start[c]:start[c + 1]]
+        self.order, self.start = _bin_by_cell(self.positions, self.lower, width, self.z_lower, reach, self.cells,
+                                              layers_first)
 
     def arrays(self):
         return (self.positions[self.order], self.radii[self.order], self.order, self.start,
                 self.lower, self.upper, self.z_lower, self.cell_height, self.cells)
 
 
-def _cell_index(positions, lower, width, z_lower, cell_height, cells):
-    ij = np.floor((positions[:, :2] - lower) / width * cells[:2]).astype(np.int64) % cells[:2]
-    k = np.clip(np.floor((positions[:, 2] - z_lower) / cell_height).astype(np.int64), 0, cells[2] - 1)
-    return (ij[:, 0] * cells[1] + ij[:, 1]) * cells[2] + k
+@jit
+def _cell_of(x, y, z, lower, width, z_lower, cell_height, cells, layers_first):
+    """Cell (i, j, k) of the point as one index (see :class:`_SphereGrid`): periodic in x and y, heights
+    below and above the grid in its bottom and top layers."""
+    i = int(np.floor((x - lower[0]) / width[0] * cells[0])) % cells[0]
+    j = int(np.floor((y - lower[1]) / width[1] * cells[1])) % cells[1]
+    k = min(max(int(np.floor((z - z_lower) / cell_height)), 0), cells[2] - 1)
+    if layers_first:
+        return (k * cells[0] + i) * cells[1] + j
+    return (i * cells[1] + j) * cells[2] + k
+
+
+@jit
+def _bin_by_cell(positions, lower, width, z_lower, cell_height, cells, layers_first):
+    """Counting sort of the points by cell: (order, start), cell c holding order[start[c]:start[c + 1]] in
+    index order (what a stable sort by cell gives, in O(n) rather than O(n log n))."""
+    n = positions.shape[0]
+    cell = np.empty(n, dtype=np.int64)
+    start = np.zeros(cells[0] * cells[1] * cells[2] + 1, dtype=np.int64)
+    for m in range(n):
+        cell[m] = _cell_of(positions[m, 0], positions[m, 1], positions[m, 2], lower, width, z_lower, cell_height,
+                           cells, layers_first)
+        start[cell[m] + 1] += 1
+    for c in range(len(start) - 1):
+        start[c + 1] += start[c]
+    order = np.empty(n, dtype=np.int64)
+    filled = start[:-1].copy()
+    for m in range(n):
+        order[filled[cell[m]]] = m
+        filled[cell[m]] += 1
+    return order, start
 
 
 def _van_der_corput(n, base):
@@ -216,25 +276,20 @@ def _van_der_corput(n, base):
 
 
 @jit
-def _neighbour_cells(x, y, z, lower, width, z_lower, cell_height, cells, out):
-    """Fill ``out`` with the distinct cells around the point (periodic in x, y); return how many."""
-    ci = int(np.floor((x - lower[0]) / width[0] * cells[0])) % cells[0]
-    cj = int(np.floor((y - lower[1]) / width[1] * cells[1])) % cells[1]
-    ck = int(np.floor((z - z_lower) / cell_height))
-    return _cells_around(ci, cj, ck, cells, out)
+def _columns_around(ci, cj, reach, cells, out):
+    """Fill ``out`` with the distinct columns i cells[1] + j within ``reach`` columns of (ci, cj), periodic in
+    x and y (every column of an axis with fewer than 2 reach + 1), x outer and y inner; return how many.
 
-
-@jit
-def _cells_around(ci, cj, ck, cells, out):
-    """Fill ``out`` with the distinct cells around cell (ci, cj, ck) (periodic in x, y); return how many."""
+    The cells of a column are consecutive in a cell-sorted list (cell (i cells[1] + j) cells[2] + k), so
+    the cells around a point are read as one run of the list per column."""
     count = 0
-    for a in range(min(3, cells[0])):
-        i = (ci - 1 + a) % cells[0] if cells[0] >= 3 else a
-        for b in range(min(3, cells[1])):
-            j = (cj - 1 + b) % cells[1] if cells[1] >= 3 else b
-            for k in range(max(ck - 1, 0), min(ck + 2, cells[2])):
-                out[count] = (i * cells[1] + j) * cells[2] + k
-                count += 1
+    wide_i, wide_j = cells[0] >= 2 * reach + 1, cells[1] >= 2 * reach + 1
+    for a in range(2 * reach + 1 if wide_i else cells[0]):
+        i = (ci - reach + a) % cells[0] if wide_i else a
+        for b in range(2 * reach + 1 if wide_j else cells[1]):
+            j = (cj - reach + b) % cells[1] if wide_j else b
+            out[count] = i * cells[1] + j
+            count += 1
     return count
 
 
@@ -246,14 +301,15 @@ def _volume_below(centre_z, radius, z):
 
 
 @jit
-def _sphere_slab_volumes(positions, radii, edges):
-    """Sum over spheres of their volume in each slab [edges[k], edges[k+1]] (spherical caps, exact).
+def _sphere_slab_volumes(positions, radii, order, edges):
+    """Sum over spheres, in the given ``order``, of their volume in each slab [edges[k], edges[k+1]]
+    (spherical caps, exact).
 
     A sphere counts with its whole horizontal extent: laterally it lies in the box or, with
     periodic sides, its images wrap the parts outside back in.
     """
     volume = np.zeros(len(edges) - 1)
-    for i in range(positions.shape[0]):
+    for i in order:
         zc, r = positions[i, 2], radii[i]
         k = max(np.searchsorted(edges, zc - r, side="right") - 1, 0)
         below = _volume_below(zc, r, edges[k])
@@ -279,19 +335,20 @@ def _overlap_lists(centres, radii, tolerance, start, lower, upper, cells):
     neighbour = np.empty(capacity, dtype=np.int64)
     offset = np.empty((capacity, 3))
     first = np.zeros(n + 1, dtype=np.int64)
-    around = np.empty(27, dtype=np.int64)
+    columns = np.empty(9, dtype=np.int64)
     rows = 0
     for ci in range(cells[0]):
         for cj in range(cells[1]):
+            n_columns = _columns_around(ci, cj, 1, cells, columns)
             for ck in range(cells[2]):
                 cell = (ci * cells[1] + cj) * cells[2] + ck
                 if start[cell] == start[cell + 1]:
                     continue
-                n_around = _cells_around(ci, cj, ck, cells, around)
+                bottom, top = max(ck - 1, 0), min(ck + 2, cells[2])  # the cells ck - 1 ... ck + 1 of a column
                 for m in range(start[cell], start[cell + 1]):
                     first[m] = rows
-                    for c in range(n_around):
-                        for other in range(start[around[c]], start[around[c] + 1]):
+                    for c in range(n_columns):
+                        for other in range(start[columns[c] * cells[2] + bottom], start[columns[c] * cells[2] + top]):
                             if other == m:
                                 continue
                             dx = _minimum_image(centres[other, 0] - centres[m, 0], width[0])
@@ -525,4 +582,8 @@ def _sampled_excess(positions, radii, first, neighbour, offset, axis, plane, dis
 
 @jit
 def _minimum_image(delta, width):
+    """The image of ``delta`` in [-width / 2, width / 2]; within a quarter width it is ``delta`` itself, which
+    the formula would return too, so the division is skipped there (most pairs of a large box)."""
+    if abs(delta) < 0.25 * width:
+        return delta
     return delta - width * np.floor(delta / width + 0.5)

@@ -6,7 +6,8 @@
   :func:`vertical_order` (<P2(cos θ)> about z) and :func:`angle_distribution` (p(θ));
 - positional order: :func:`radial_distribution`, g(r) of the particle centres in a slab, and
   :func:`region_radial_distribution` in a region of any shape;
-- contact network: :func:`contact_pairs` (sphere–sphere contacts between particles and their normals),
+- contact network: :func:`contact_pairs` (sphere–sphere contacts between particles and their normals;
+  :func:`contact_network` adds the spheres that overlap, from the same search),
   :func:`contacts_per_particle`, :func:`contact_number_distribution`, :func:`fabric_tensor` and
   :func:`fabric_anisotropy`.
 
@@ -15,16 +16,32 @@ Pair searches use the cubic cell list of :mod:`parsim.core.sediment`, so they co
 sediment of N spheres.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from parsim.core.jit import jit
-from parsim.core.sediment import CONTACT_GAP_TOLERANCE, _SphereGrid, _minimum_image, _neighbour_cells
+from parsim.core.sediment import (CONTACT_GAP_TOLERANCE, OVERLAP_TOLERANCE, _columns_around, _SphereGrid,
+                                  _minimum_image)
 
 # Two smallest principal moments of inertia equal within this relative tolerance: no long axis.
 ISOTROPY_RTOL = 1e-6
-# First guess of the number of contacts per sphere (the kissing number of equal spheres); the
-# contact search runs again with the exact count when a packing has more.
-CONTACTS_PER_SPHERE_GUESS = 12
+# First guess of the number of contacts per sphere, each contact counted once: about 3 in a random
+# packing of equal spheres (coordination 6); the contact search doubles its list when a packing has
+# more (6 in a crystal of 12 neighbours).
+CONTACTS_PER_SPHERE_GUESS = 4
+# g(r)'s cell list has cells of r_max / RDF_CELLS_PER_RANGE or more, and a reference centre scans
+# 2 RDF_CELLS_PER_RANGE + 1 cells along each axis: with 2 the scanned volume is 3.7 times the
+# sphere of radius r_max (6.4 times with cells of r_max).
+RDF_CELLS_PER_RANGE = 2
+
+
+class ContactNetwork(NamedTuple):
+    """The sphere contacts of a packing and the spheres that overlap others (:func:`contact_network`)."""
+
+    pairs: np.ndarray  # (m, 2) sphere indices i < j of each contact between particles, sorted
+    normals: np.ndarray  # (m, 3) unit vectors from sphere i to sphere j
+    overlapping: np.ndarray  # (n,) bool: the sphere may overlap another by the packing's overlap tolerance
 
 
 def long_axis(offsets, radii):
@@ -169,10 +186,16 @@ def region_radial_distribution(centres, in_region, region_volume, reference, r_m
     r = 0.5 * (edges[1:] + edges[:-1])
     if len(reference) == 0:
         return r, np.full(bins, np.nan), 0
-    grid = _SphereGrid(x, np.full(len(x), 0.5 * r_max), lower, upper)  # cells at least r_max wide
-    _, _, order, start, _, _, z_lower, cell_height, cells = grid.arrays()
-    counts = _shell_counts(x, reference, r_max, bins, bool(periodic), order, start, lower, upper, z_lower,
-                           cell_height, cells)
+    # Only centres within r_max of a reference's height can be counted: the cell list holds those (with a
+    # margin, so that round-off cannot leave one out), sorted by cell, so that a reference scans contiguous runs
+    z = x[:, 2]
+    reach = 1.001 * r_max
+    nearby = np.flatnonzero((z >= z[reference].min() - reach) & (z <= z[reference].max() + reach))
+    grid = _SphereGrid(x[nearby], np.full(len(nearby), 0.5 * r_max / RDF_CELLS_PER_RANGE), lower, upper)
+    sorted_index = np.full(len(x), -1, dtype=np.int64)  # a centre's place in the cell list
+    sorted_index[nearby[grid.order]] = np.arange(len(grid.order))
+    counts = _shell_counts(grid.positions[grid.order], sorted_index[reference], r_max, bins, bool(periodic),
+                           grid.start, lower, upper, grid.z_lower, grid.cell_height, grid.cells, RDF_CELLS_PER_RANGE)
     density = np.count_nonzero(in_region) / region_volume
     shell = 4.0 / 3.0 * np.pi * (edges[1:] ** 3 - edges[:-1] ** 3)
     return r, counts / (len(reference) * density * shell), len(reference)
@@ -190,6 +213,22 @@ def contact_pairs(positions, radii, particle, box_lower_xy, box_upper_xy, period
     largest diameter); without, the box bounds only lay out the cell list and may be the extent of
     the spheres (lateral walls, a heap).
     """
+    network = contact_network(positions, radii, particle, box_lower_xy, box_upper_xy, periodic)
+    return network.pairs, network.normals
+
+
+def contact_network(positions, radii, particle, box_lower_xy, box_upper_xy, periodic):
+    """The contacts of :func:`contact_pairs` and, from the same search, the spheres that overlap:
+    :class:`ContactNetwork` (pairs, normals, overlapping).
+
+    ``overlapping`` flags each sphere that overlaps another, of any particle, by more than half the
+    overlap tolerance of :mod:`parsim.core.sediment` times the smallest radius,
+    |x_j − x_i| < R_i + R_j − OVERLAP_TOLERANCE min R / 2, with minimum images in x and y whether
+    or not the contacts are ``periodic`` (the packing kernels take the box as periodic). The
+    packing fraction searches overlaps beyond OVERLAP_TOLERANCE times a mean radius, so the
+    spheres not flagged overlap nothing it counts (``overlapping`` of
+    :func:`parsim.core.sediment.packing_fractions`), for these spheres or any subset of them.
+    """
     x = _as_points(positions)
     radii = np.ascontiguousarray(radii, dtype=np.float64)
     particle = np.ascontiguousarray(particle, dtype=np.int64)
@@ -199,18 +238,17 @@ def contact_pairs(positions, radii, particle, box_lower_xy, box_upper_xy, period
     if periodic and np.any(width < 4.0 * radii.max()):
         raise ValueError(f"periodic box widths {width} must exceed twice the largest diameter")
     tolerance = CONTACT_GAP_TOLERANCE * float(np.mean(radii))
-    grid = _SphereGrid(x, radii + 0.5 * tolerance, box_lower_xy, box_upper_xy)  # cells span R_i + R_j + tolerance
-    _, _, order, start, lower, upper, z_lower, cell_height, cells = grid.arrays()
-    capacity = CONTACTS_PER_SPHERE_GUESS * len(x)
-    while True:
-        pairs, normals = np.empty((capacity, 2), dtype=np.int64), np.empty((capacity, 3))
-        count = _contacts(x, radii, particle, tolerance, bool(periodic), pairs, normals, order, start, lower,
-                          upper, z_lower, cell_height, cells)
-        if count <= capacity:
-            break
-        capacity = count
-    ranked = np.lexsort((pairs[:count, 1], pairs[:count, 0]))
-    return pairs[ranked], normals[ranked]
+    overlap_cut = 0.5 * OVERLAP_TOLERANCE * float(radii.min())
+    # cells span R_i + R_j + tolerance; layer by layer, the order in which a sediment was deposited, about
+    grid = _SphereGrid(x, radii + 0.5 * tolerance, box_lower_xy, box_upper_xy, layers_first=True)
+    order, lower, upper = grid.order, grid.lower, grid.upper
+    overlapping = np.zeros(len(x), dtype=bool)
+    x_sorted = _gather(x, order)
+    row_start, partner, contacts = _touching_in_cells(x_sorted, _gather(radii, order), _gather(particle, order), order,
+                                                      tolerance, overlap_cut, bool(periodic), grid.start, lower, upper,
+                                                      grid.cells, CONTACTS_PER_SPHERE_GUESS * len(x) + 16, overlapping)
+    pairs, normals = _sorted_contacts(x_sorted, order, row_start, partner, contacts, bool(periodic), upper - lower)
+    return ContactNetwork(pairs, normals, overlapping)
 
 
 def coordination(positions, radii, particle, particle_com_z, box_lower_xy, box_upper_xy, z_low, z_high,
@@ -243,10 +281,13 @@ def contacts_per_particle(pairs, particle, n_particles):
     counts every sphere–sphere contact. ``pairs`` are sphere index pairs of
     :func:`contact_pairs`, ``particle`` maps spheres to particles 0 … n_particles − 1.
     """
-    owners = np.sort(np.asarray(particle, dtype=np.int64)[np.asarray(pairs, dtype=np.int64).reshape(-1, 2)], axis=1)
-    touching = np.unique(owners[:, 0] * n_particles + owners[:, 1])  # each pair of particles once
-    return np.bincount(touching // n_particles, minlength=n_particles) + np.bincount(touching % n_particles,
-                                                                                      minlength=n_particles)
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
+    particle = np.ascontiguousarray(particle, dtype=np.int64)
+    if len(pairs) and not (0 <= pairs.min() and pairs.max() < len(particle)):
+        raise ValueError("pairs must be sphere indices of particle")
+    if len(particle) and not (0 <= particle.min() and particle.max() < n_particles):
+        raise ValueError(f"particle must number particles 0 ... {n_particles - 1}")
+    return _distinct_partners(pairs, particle, int(n_particles))
 
 
 def contact_number_distribution(counts, selected, max_count):
@@ -319,31 +360,36 @@ def _in_box(x, lower, upper, periodic, z_low, z_high, margin):
 
 
 @jit
-def _separation(positions, i, j, width, periodic):
-    """x_j − x_i, the minimum image in x and y when ``periodic``."""
-    dx = positions[j, 0] - positions[i, 0]
-    dy = positions[j, 1] - positions[i, 1]
-    if periodic:
-        dx, dy = _minimum_image(dx, width[0]), _minimum_image(dy, width[1])
-    return dx, dy, positions[j, 2] - positions[i, 2]
+def _shell_counts(sorted_centres, reference, r_max, bins, periodic, start, lower, upper, z_lower, cell_height,
+                  cells, reach):
+    """Histogram of the distances r < r_max from the reference centres to all other centres.
 
-
-@jit
-def _shell_counts(centres, reference, r_max, bins, periodic, order, start, lower, upper, z_lower, cell_height,
-                  cells):
-    """Histogram of the distances r < r_max from the ``reference`` centres to all other centres."""
+    ``sorted_centres``: the centres of the cell list in its order, cell c holding start[c]:start[c + 1];
+    ``reference``: the references' places in it. Cells are r_max / ``reach`` or more wide, so a
+    reference scans ``reach`` cells on each side; the cells of one column are consecutive, so each
+    column is one run of the list.
+    """
     width = upper - lower
-    around = np.empty(27, dtype=np.int64)
     counts = np.zeros(bins, dtype=np.int64)
+    columns = np.empty((2 * reach + 1) ** 2, dtype=np.int64)
     for i in reference:
-        n_cells = _neighbour_cells(centres[i, 0], centres[i, 1], centres[i, 2], lower, width, z_lower, cell_height,
-                                   cells, around)
-        for c in range(n_cells):
-            for k in range(start[around[c]], start[around[c] + 1]):
-                j = order[k]
+        xi, yi, zi = sorted_centres[i, 0], sorted_centres[i, 1], sorted_centres[i, 2]
+        ci = int(np.floor((xi - lower[0]) / width[0] * cells[0])) % cells[0]
+        cj = int(np.floor((yi - lower[1]) / width[1] * cells[1])) % cells[1]
+        ck = int(np.floor((zi - z_lower) / cell_height))
+        bottom, top = max(ck - reach, 0), min(ck + reach + 1, cells[2])
+        if bottom >= top:
+            continue
+        n_columns = _columns_around(ci, cj, reach, cells, columns)
+        for c in range(n_columns):
+            for j in range(start[columns[c] * cells[2] + bottom], start[columns[c] * cells[2] + top]):
                 if j == i:
                     continue
-                dx, dy, dz = _separation(centres, i, j, width, periodic)
+                dx = sorted_centres[j, 0] - xi
+                dy = sorted_centres[j, 1] - yi
+                if periodic:
+                    dx, dy = _minimum_image(dx, width[0]), _minimum_image(dy, width[1])
+                dz = sorted_centres[j, 2] - zi
                 distance_squared = dx * dx + dy * dy + dz * dz
                 if distance_squared < r_max * r_max:
                     counts[min(int(np.sqrt(distance_squared) / r_max * bins), bins - 1)] += 1
@@ -351,26 +397,174 @@ def _shell_counts(centres, reference, r_max, bins, periodic, order, start, lower
 
 
 @jit
-def _contacts(positions, radii, particle, tolerance, periodic, pairs, normals, order, start, lower, upper, z_lower,
-              cell_height, cells):
-    """Fill ``pairs`` and ``normals`` with the contacts i < j (as far as they hold); return how many there are."""
+def _touching_in_cells(x, radii, particle, order, tolerance, overlap_cut, periodic, start, lower, upper, cells,
+                       capacity, overlapping):
+    """Every pair of spheres of the cell list closer than the contact criterion, found once: (row_start,
+    partner, contacts), sphere m of the list (in its order) touching the spheres partner[row_start[m]:
+    row_start[m + 1]] that come after it, and contacts[i + 1] the number of contacts of sphere i (its own
+    number) with spheres of higher numbers; flags in ``overlapping`` (indexed by the spheres' own
+    numbers) the spheres that overlap another by more than ``overlap_cut`` (minimum images in x and y,
+    see :func:`contact_network`).
+
+    ``x``, ``radii``, ``particle``: the spheres of a list sorted layer by layer (``layers_first`` of the
+    cell grid), ``order`` their own numbers. The cells are visited in order and each sphere meets the
+    later spheres of its 27 cells, read as runs of the list (:func:`_runs_around`), so the search reads
+    the list nearly sequentially; and as a sediment is deposited about layer by layer, the contacts
+    it finds one after the other belong to spheres of nearby numbers, which keeps the counts here
+    and the sorting of :func:`_sorted_contacts` within a small part of memory. A pair farther apart
+    than R_i + R_j + tolerance (minimum images, the shortest separation) is passed over at once;
+    for the others the gap test is the one of :func:`contact_pairs`, on x_j − x_i with i < j the
+    spheres' own numbers.
+    """
     width = upper - lower
-    around = np.empty(27, dtype=np.int64)
+    n = x.shape[0]
+    partner = np.empty(capacity, dtype=np.int64)
+    row_start = np.zeros(n + 1, dtype=np.int64)
+    contacts = np.zeros(n + 1, dtype=np.int64)
+    runs = np.empty((27, 2), dtype=np.int64)
     count = 0
-    for i in range(positions.shape[0]):
-        n_cells = _neighbour_cells(positions[i, 0], positions[i, 1], positions[i, 2], lower, width, z_lower,
-                                   cell_height, cells, around)
-        for c in range(n_cells):
-            for k in range(start[around[c]], start[around[c] + 1]):
-                j = order[k]
-                if j <= i or particle[j] == particle[i]:
+    for ck in range(cells[2]):
+        for ci in range(cells[0]):
+            for cj in range(cells[1]):
+                cell = (ck * cells[0] + ci) * cells[1] + cj
+                if start[cell] == start[cell + 1]:
                     continue
-                dx, dy, dz = _separation(positions, i, j, width, periodic)
-                distance = np.sqrt(dx * dx + dy * dy + dz * dz)
-                if distance - radii[i] - radii[j] < tolerance:
-                    if count < len(pairs):
-                        pairs[count, 0], pairs[count, 1] = i, j
-                        normals[count, 0], normals[count, 1], normals[count, 2] = (dx / distance, dy / distance,
-                                                                                   dz / distance)
+                n_runs = _runs_around(ci, cj, ck, cells, start, runs)
+                for m in range(start[cell], start[cell + 1]):
+                    row_start[m] = count
+                    xm, ym, zm, rm = x[m, 0], x[m, 1], x[m, 2], radii[m]
+                    for run in range(n_runs):
+                        for other in range(max(runs[run, 0], m + 1), runs[run, 1]):
+                            image_x = _minimum_image(x[other, 0] - xm, width[0])
+                            image_y = _minimum_image(x[other, 1] - ym, width[1])
+                            dz = x[other, 2] - zm
+                            reach = rm + radii[other] + tolerance
+                            if image_x * image_x + image_y * image_y + dz * dz > reach * reach * (1.0 + 1e-12):
+                                continue  # the gap exceeds the tolerance by far: neither contact nor overlap
+                            first, second = (m, other) if order[m] < order[other] else (other, m)
+                            dx = x[second, 0] - x[first, 0]
+                            dy = x[second, 1] - x[first, 1]
+                            dz = x[second, 2] - x[first, 2]
+                            image_x, image_y = _minimum_image(dx, width[0]), _minimum_image(dy, width[1])
+                            overlap = radii[first] + radii[second] - overlap_cut
+                            if image_x * image_x + image_y * image_y + dz * dz < overlap * overlap and overlap > 0.0:
+                                overlapping[order[m]] = True
+                                overlapping[order[other]] = True
+                            if particle[m] == particle[other]:
+                                continue
+                            if periodic:
+                                dx, dy = image_x, image_y
+                            if np.sqrt(dx * dx + dy * dy + dz * dz) - radii[first] - radii[second] < tolerance:
+                                if count == len(partner):
+                                    grown = np.empty(2 * len(partner), dtype=np.int64)
+                                    grown[:count] = partner[:count]
+                                    partner = grown
+                                partner[count] = other
+                                contacts[order[first] + 1] += 1
+                                count += 1
+    row_start[n] = count
+    return row_start, partner[:count], contacts
+
+
+@jit
+def _runs_around(ci, cj, ck, cells, start, runs):
+    """The spheres of the 27 cells around cell (ci, cj, ck) (periodic in x and y, each cell once) of a list
+    sorted layer by layer (cell (k cells[0] + i) cells[1] + j): fill ``runs`` with the runs (first, end) of
+    the list, one per row of three cells (j - 1 ... j + 1) when they are consecutive; return how many."""
+    count = 0
+    wide_i, wide_j = cells[0] >= 3, cells[1] >= 3
+    for k in range(max(ck - 1, 0), min(ck + 2, cells[2])):
+        for a in range(3 if wide_i else cells[0]):
+            row = (k * cells[0] + ((ci - 1 + a) % cells[0] if wide_i else a)) * cells[1]
+            if not wide_j:  # every cell of the row
+                runs[count, 0], runs[count, 1] = start[row], start[row + cells[1]]
+                count += 1
+            elif 1 <= cj <= cells[1] - 2:
+                runs[count, 0], runs[count, 1] = start[row + cj - 1], start[row + cj + 2]
+                count += 1
+            else:  # the row wraps around the periodic side
+                for b in range(3):
+                    j = (cj - 1 + b) % cells[1]
+                    runs[count, 0], runs[count, 1] = start[row + j], start[row + j + 1]
                     count += 1
     return count
+
+
+@jit
+def _sorted_contacts(x, order, row_start, partner, contacts, periodic, width):
+    """The contacts of :func:`_touching_in_cells` as sphere pairs i < j (their own numbers), sorted by i
+    then j, and the unit normals (x_j − x_i) / |x_j − x_i| (minimum images when ``periodic``).
+
+    ``x``: the spheres in the cell list's order; ``contacts`` is turned into the first contact of each
+    sphere (i: contacts[i]:contacts[i + 1]). The normals are computed where the contacts were found, from
+    the list's nearby spheres, and move with their pairs."""
+    m = len(partner)
+    for i in range(len(contacts) - 1):
+        contacts[i + 1] += contacts[i]
+    pairs = np.empty((m, 2), dtype=np.int64)
+    normals = np.empty((m, 3))
+    filled = contacts[:-1].copy()
+    for mm in range(len(row_start) - 1):
+        for k in range(row_start[mm], row_start[mm + 1]):
+            first, second = (mm, partner[k]) if order[mm] < order[partner[k]] else (partner[k], mm)
+            dx = x[second, 0] - x[first, 0]
+            dy = x[second, 1] - x[first, 1]
+            if periodic:
+                dx, dy = _minimum_image(dx, width[0]), _minimum_image(dy, width[1])
+            dz = x[second, 2] - x[first, 2]
+            distance = np.sqrt(dx * dx + dy * dy + dz * dz)
+            slot = filled[order[first]]
+            filled[order[first]] += 1
+            pairs[slot, 0], pairs[slot, 1] = order[first], order[second]
+            normals[slot, 0], normals[slot, 1], normals[slot, 2] = dx / distance, dy / distance, dz / distance
+    for i in range(len(contacts) - 1):
+        # a sphere has a few contacts: insertion sort of its partners
+        for k in range(contacts[i] + 1, contacts[i + 1]):
+            j, nx, ny, nz = pairs[k, 1], normals[k, 0], normals[k, 1], normals[k, 2]
+            slot = k
+            while slot > contacts[i] and pairs[slot - 1, 1] > j:
+                pairs[slot, 1] = pairs[slot - 1, 1]
+                normals[slot, 0], normals[slot, 1], normals[slot, 2] = (normals[slot - 1, 0], normals[slot - 1, 1],
+                                                                        normals[slot - 1, 2])
+                slot -= 1
+            pairs[slot, 1] = j
+            normals[slot, 0], normals[slot, 1], normals[slot, 2] = nx, ny, nz
+    return pairs, normals
+
+
+@jit
+def _gather(values, order):
+    """values[order] (rows of a 2D array), in one pass."""
+    out = np.empty((len(order),) + values.shape[1:], dtype=values.dtype)
+    for m in range(len(order)):
+        out[m] = values[order[m]]
+    return out
+
+
+@jit
+def _distinct_partners(pairs, particle, n_particles):
+    """Number of distinct particles each particle touches through the sphere ``pairs`` (a pair within one
+    particle counts it twice, as a contact with itself from both sides)."""
+    m = pairs.shape[0]
+    first = np.zeros(n_particles + 1, dtype=np.int64)  # the pairs whose lower particle is p: first[p]:first[p + 1]
+    for k in range(m):
+        first[min(particle[pairs[k, 0]], particle[pairs[k, 1]]) + 1] += 1
+    for p in range(n_particles):
+        first[p + 1] += first[p]
+    higher = np.empty(m, dtype=np.int64)
+    filled = first[:-1].copy()
+    for k in range(m):
+        a, b = particle[pairs[k, 0]], particle[pairs[k, 1]]
+        low, high = (a, b) if a <= b else (b, a)
+        higher[filled[low]] = high
+        filled[low] += 1
+    touched = np.zeros(n_particles, dtype=np.int64)
+    seen = np.full(n_particles, -1, dtype=np.int64)  # seen[q] == p: q already counted as a partner of p
+    for p in range(n_particles):
+        for k in range(first[p], first[p + 1]):
+            q = higher[k]
+            if seen[q] != p:
+                seen[q] = p
+                touched[p] += 1
+                touched[q] += 1
+    return touched

@@ -235,21 +235,28 @@ def measure(params, result, species, drops, geometry, skip, substrate) -> dict:
     com = result.center_of_mass
     in_area = region.in_bulk_area(com[:, :2])
     in_bulk = in_area & (com[:, 2] >= slab[0]) & (com[:, 2] < slab[1])
-    positions = np.concatenate([substrate[0], result.positions])
-    radii = np.concatenate([substrate[1], result.radii])
-    # the substrate is one more particle, index n, never in the bulk
-    particle = np.concatenate([np.full(len(substrate[1]), len(drops.scale)), result.particle])
+    if len(substrate[1]):
+        positions = np.concatenate([substrate[0], result.positions])
+        radii = np.concatenate([substrate[1], result.radii])
+        # the substrate is one more particle, index n, never in the bulk
+        particle = np.concatenate([np.full(len(substrate[1]), len(drops.scale)), result.particle])
+    else:
+        positions, radii, particle = result.positions, result.radii, result.particle
     # a substrate sphere is in the bulk's area when its centre is, a deposited one when its particle's centre is
     sphere_in_area = np.concatenate([region.in_bulk_area(substrate[0][:, :2]), in_area[result.particle]])
+    # one search of the sphere pairs gives the contacts and the spheres that overlap, whose overlaps alone
+    # the packing fraction has to measure
+    network = structure.contact_network(positions, radii, particle, region.lower, region.upper, region.periodic)
     statistics = {
         "filling_height": heights.filling,
         "substrate_height": heights.substrate,
         "bulk_wall_distance": region.wall_distance,
-        **_packing(params, result, region, heights, drops, len(species), positions, radii, sphere_in_area),
+        **_packing(params, result, region, heights, drops, len(species), positions, radii, sphere_in_area,
+                   network.overlapping),
         **_mixture(result, species, drops, volume, heights),
         **_orientations(params, result, species, drops, in_bulk),
         "radial_distribution": _radial_distribution(params, com, diameter, region, slab),
-        **_contacts(positions, radii, particle, region, in_bulk),
+        **_contacts(positions, radii, particle, region, in_bulk, network),
         "n_spheres": len(result.radii),
         "events_per_particle": float(result.event_counts.sum(axis=1).mean()),
         "largest_steps_per_particle": int(result.steps.max()),
@@ -292,9 +299,11 @@ def pile_heights(com_z, volume, substrate) -> Heights:
     return Heights(height, height * substrate_volume / (substrate_volume + float(volume.sum())))
 
 
-def _packing(params, result, region, heights, drops, n_species, positions, radii, sphere_in_area) -> dict:
+def _packing(params, result, region, heights, drops, n_species, positions, radii, sphere_in_area,
+             overlapping) -> dict:
     """Bulk packing fraction and the profiles phi(z), phi_s(z) of the container (substrate spheres count in
-    the bulk and in phi(z)); ``sphere_in_area`` marks the spheres the bulk of a walled container counts."""
+    the bulk and in phi(z)); ``sphere_in_area`` marks the spheres the bulk of a walled container counts,
+    ``overlapping`` those that may overlap others (the others need no search for overlaps)."""
     bins = params["profile_bins"]
     if not region.measured:
         return {"bulk_packing_fraction": np.nan, "packing_profile": np.full(bins, np.nan),
@@ -304,28 +313,29 @@ def _packing(params, result, region, heights, drops, n_species, positions, radii
     # in a periodic box the bulk is a slab of the whole box: measured in the same pass as the profile
     slabs = [slab, *zip(edges[:-1], edges[1:])] if region.periodic else list(zip(edges[:-1], edges[1:]))
 
-    def profile(x, r):
-        return packing_fractions(x, r, region.lower, region.upper, slabs,
-                                 samples=params["packing_samples"]) / region.inside_fraction
+    def profile(x, r, flags):
+        return packing_fractions(x, r, region.lower, region.upper, slabs, samples=params["packing_samples"],
+                                 overlapping=flags) / region.inside_fraction
 
-    everything = profile(positions, radii)
+    everything = profile(positions, radii, overlapping)
     bulk = (float(everything[0]) if region.periodic else
             _bulk_packing_fraction(positions[sphere_in_area], radii[sphere_in_area], region, slab,
-                                   params["packing_samples"]))
+                                   params["packing_samples"], overlapping[sphere_in_area]))
     if n_species == 1 and len(positions) == len(result.positions):  # one species, no substrate: phi_s = phi
         return {"bulk_packing_fraction": bulk, "packing_profile": everything[-bins:],
                 "species_packing_profile": everything[None, -bins:]}
     sphere_species = drops.species[result.particle]
+    deposited_overlapping = overlapping[len(positions) - len(result.positions):]  # after the substrate's spheres
     per_species = np.zeros((n_species, bins))
     for s in range(n_species):
         mine = sphere_species == s
         if mine.any():
-            per_species[s] = profile(result.positions[mine], result.radii[mine])[-bins:]
+            per_species[s] = profile(result.positions[mine], result.radii[mine], deposited_overlapping[mine])[-bins:]
     return {"bulk_packing_fraction": bulk, "packing_profile": everything[-bins:],
             "species_packing_profile": per_species}
 
 
-def _bulk_packing_fraction(positions, radii, region, slab, samples) -> float:
+def _bulk_packing_fraction(positions, radii, region, slab, samples, overlapping) -> float:
     """Packing fraction of the bulk of a walled container, box or cylinder (NaN when it has no room).
 
     The estimator: the spheres given (those of the particles whose centre of mass lies in the bulk's
@@ -334,14 +344,16 @@ def _bulk_packing_fraction(positions, radii, region, slab, samples) -> float:
     the slab's thickness. A sphere straddling the area's edge counts whole or not at all; for a
     packing that is statistically uniform across the area the estimate is unbiased (the selected
     centres are as dense as all centres: Campbell's theorem). The sum over the container's box, in
-    which every sphere lies, so that the kernel's periodic sides never wrap a sphere."""
+    which every sphere lies, so that the kernel's periodic sides never wrap a sphere. ``overlapping``
+    flags the spheres that may overlap others."""
     area = region.bulk_area()
     if not area > 0.0:
         return np.nan
     if not len(radii):
         return 0.0
     box_area = float(np.prod(region.upper - region.lower))
-    return packing_fraction(positions, radii, region.lower, region.upper, *slab, samples) * box_area / area
+    return (packing_fraction(positions, radii, region.lower, region.upper, *slab, samples, overlapping)
+            * box_area / area)
 
 
 def _mixture(result, species, drops, volume, heights) -> dict:
@@ -407,12 +419,14 @@ def _radial_distribution(params, centres, diameter, region, slab) -> np.ndarray:
     return g
 
 
-def _contacts(positions, radii, particle, region, in_bulk) -> dict:
+def _contacts(positions, radii, particle, region, in_bulk, network=None) -> dict:
     """Coordination, contact numbers and fabric of the bulk particles, from one search of the
-    sphere contacts between particles (periodic only across the sides of a periodic box).
-    ``particle`` numbers the substrate's spheres ``len(in_bulk)``."""
-    pairs, normals = structure.contact_pairs(positions, radii, particle, region.lower, region.upper,
-                                             region.periodic)
+    sphere contacts between particles (periodic only across the sides of a periodic box): ``network``,
+    the search :func:`measure` made, or a new one. ``particle`` numbers the substrate's spheres
+    ``len(in_bulk)``."""
+    if network is None:
+        network = structure.contact_network(positions, radii, particle, region.lower, region.upper, region.periodic)
+    pairs, normals = network.pairs, network.normals
     n = len(in_bulk)
     sphere_contacts = structure.sphere_contacts_per_particle(pairs, particle, n + 1)[:n]
     touched = structure.contacts_per_particle(pairs, particle, n + 1)[:n]
