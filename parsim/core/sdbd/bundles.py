@@ -120,9 +120,10 @@ Scratch = bundle("Scratch", ["axis", "pivot", "e1", "e2", "normal", "normal_2", 
 #: Everything a particle's descent works on besides the particle and the sediment: its
 #: ``contacts``, their ``geometry``, the ``pivots`` of a rotation and the contacts
 #: ``released`` by the last decision, the ``trial`` geometry of the pivots after a trial
-#: rotation (4.1), the event ``window``, and ``scratch``.
+#: rotation (4.1), the event ``window``, ``scratch``, and the run's ``counters``
+#: (:mod:`.counters`; empty when not counting).
 Workspace = bundle("Workspace", ["contacts", "geometry", "pivots", "released", "trial", "window",
-                                     "scratch"])
+                                     "scratch", "counters"])
 
 #: The output of a run, preallocated for all particles: per sphere ``positions`` (lab
 #: frame, wrapped into a periodic box), ``radii`` and ``particle`` index; per particle the
@@ -149,8 +150,8 @@ def new_contact_geometry(size):
 
 
 @jit
-def new_workspace():
-    """Every bundle of :class:`Workspace`, allocated once per run."""
+def new_workspace(counters):
+    """Every bundle of :class:`Workspace`, allocated once per run, with the run's ``counters``."""
     window = EventWindow(np.empty(MAX_TIES), np.empty(MAX_TIES), np.empty(MAX_TIES),
                          np.empty(MAX_TIES, dtype=np.int64), np.empty(MAX_TIES, dtype=np.int64),
                          np.empty(MAX_TIES, dtype=np.int64), np.empty(MAX_TIES, dtype=np.int64),
@@ -159,7 +160,7 @@ def new_workspace():
                       np.empty(3), np.empty(4), np.empty(4), np.empty(8), np.empty(8), np.empty(3))
     return Workspace(new_contact_list(MAX_CONTACTS), new_contact_geometry(MAX_CONTACTS),
                      new_contact_list(2), new_contact_list(MAX_CONTACTS), new_contact_geometry(2),
-                     window, scratch)
+                     window, scratch, counters)
 
 
 @jit(inline="always")

@@ -51,6 +51,7 @@ import numba
 import numpy as np
 
 from parsim.core.jit import jit
+from parsim.core.sdbd import counters
 from parsim.core.sdbd.bundles import grid_arrays
 from parsim.core.sdbd.bundles import Grid, Particle, Record, Sediment, Settings, new_workspace
 from parsim.core.sdbd.constants import (
@@ -97,7 +98,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
                    floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell,
                    debug, trace_particle, trace, clock_from,
                    out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state,
-                   out_events, out_steps, diag):
+                   out_events, out_steps, diag, tallies):
     """Deposit all particles; returns ``(stopped_at, n_spheres_written)``.
 
     Inputs are validated by :func:`parsim.core.sdbd.deposit`.  The ``m`` spheres of the
@@ -116,6 +117,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     after the step, number of contacts after the step, and the obstacle index of up to 5
     contacts.  ``diag[D_CLOCKED_SECONDS]`` receives the wall-clock time spent on particles
     ``clock_from`` onwards (untouched when ``clock_from`` is not a particle index).
+    ``tallies`` receives the counters of :mod:`.counters` (an empty array: none are kept).
     """
     n_part = particle_shape.shape[0]
     n_max = 1
@@ -134,7 +136,8 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     sediment = Sediment(np.empty((max(n_sub + n_total, 1), 3)), np.empty(max(n_sub + n_total, 1)))
     particle = Particle(np.empty((n_max, 3)), np.empty(n_max), np.empty((n_max, 3)), np.empty(3),
                         np.empty(4), np.empty((3, 3)))
-    work = new_workspace()
+    work = new_workspace(tallies)
+    run_started = counters.start(tallies)
     history = new_descent_history()
     buf = np.empty(4096, dtype=np.int64)
     n_sed, top_z = _lay_substrate(substrate_centre, substrate_radius, sediment, grid)
@@ -146,9 +149,11 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     for p in range(n_part):
         if p == clock_from:
             clock_start = _wall_clock()
+        started = counters.start(tallies)
         n = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                           particle_rotation, particle_drop_xy, top_z, ell, particle)
         _fit_grid(n, particle, sediment, n_sed, grid)
+        counters.stop(tallies, counters.PARTICLE, started)
         state, n_c, steps, chunk_ends, overlap, buf = _descend(
             n, particle, work, history, sediment, grid, settings, out_events[p],
             p == trace_particle, trace, buf)
@@ -168,7 +173,10 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
         if debug:
             overlap, buf = max_overlap(n, particle, sediment, grid, settings.walls, buf)
             worst_overlap = max(worst_overlap, overlap)
+        started = counters.start(tallies)
         n_sed, top_z = _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, top_z, record)
+        counters.stop(tallies, counters.PARTICLE, started)
+    counters.stop(tallies, counters.TOTAL, run_started)
     diag[D_MAX_OVERLAP] = worst_overlap
     diag[D_EVENTS] = n_steps
     diag[D_CHUNKS] = n_chunk_ends
@@ -187,6 +195,7 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
     contacts = work.contacts
     geometry = work.geometry
     released = work.released
+    tallies = work.counters
     normal = work.scratch.normal
     decision = work.scratch.decision
     com = particle.com
@@ -202,9 +211,12 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
         if n_steps >= settings.max_events:
             return EVENT_LIMIT, n_c, n_steps, n_chunk_ends, worst_overlap, buf
         n_steps += 1
+        counters.add(tallies, counters.STEPS, 1)
         # ------------------------------------------------------------------- decide
+        started = counters.start(tallies)
         fill_contacts(n_c, contacts, particle, sediment, geom, geometry, normal)
         motion, k, m, _ = decide(com, n_c, geometry, ell, settings.sliding_walls, decision)
+        counters.stop(tallies, counters.DECIDE, started)
         n_c_before = n_c
         if motion == MOTION_REST:
             if not rest_checked:
@@ -212,8 +224,10 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
                 # converged, or a round-off gap) are declared closed, and the steepest
                 # descent is decided again with them
                 rest_checked = True
+                started = counters.start(tallies)
                 n_c, closed, stop, buf = close_near_obstacles(n, particle, n_c, contacts, sediment,
                                                               grid, settings, buf, normal, event_counts)
+                counters.stop(tallies, counters.AFTER_MOVE, started)
                 if stop:
                     return RESTING_ON_FLOOR, n_c, n_steps, n_chunk_ends, worst_overlap, buf
                 if closed:
@@ -222,16 +236,23 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
         rest_checked = False
         # --------------------------------------------------------------------- move
         z_before = com[2]
+        started = counters.start(tallies)
         if motion == MOTION_FALL:
             n_c, n_dr, n_executed, floor_hit, n_t, phi = fall(n, particle, n_c, work, sediment, grid,
                                                               settings, event_counts)
+            counters.stop(tallies, counters.FALL, started)
+            counters.add(tallies, counters.FALLS, 1)
         else:
             n_c, n_dr, n_executed, chunk_ends, floor_hit, n_t, phi, buf = roll(
                 n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_counts, buf)
             n_chunk_ends += chunk_ends
+            counters.stop(tallies, counters.ROLL, started)
+            counters.add(tallies, counters.ROLLS, 1)
+        started = counters.start(tallies)
         if n_executed > 1:
             event_counts[K_SIMULTANEOUS] += n_executed - 1
         n_c = keep_touching(n_c, contacts, n_dr, released, particle, sediment, geom, ell, normal)
+        counters.stop(tallies, counters.AFTER_MOVE, started)
         if settings.debug:
             overlap, buf = max_overlap(n, particle, sediment, grid, settings.walls, buf)
             worst_overlap = max(worst_overlap, overlap)
@@ -241,8 +262,10 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
         if floor_hit and settings.floor_mode == FLOOR_STOP:
             return RESTING_ON_FLOOR, n_c, n_steps, n_chunk_ends, worst_overlap, buf
         # ------------------------------------------------------------------ cycling
+        started = counters.start(tallies)
         n_c, stop, buf = after_move(z_before - com[2], history, n, particle, n_c, contacts, sediment,
                                     grid, settings, buf, normal, event_counts)
+        counters.stop(tallies, counters.AFTER_MOVE, started)
         if stop:
             return RESTING_ON_FLOOR, n_c, n_steps, n_chunk_ends, worst_overlap, buf
 

@@ -18,6 +18,8 @@ from parsim.core.sdbd.constants import (
     TOUCH_TOL,
 )
 from parsim.core.sdbd.contacts import add_contact, copy_contact
+from parsim.core.sdbd.counters import FALL_CANDIDATES
+from parsim.core.sdbd.counters import add as counters_add
 from parsim.core.sdbd.events import fall_drop
 from parsim.core.sdbd.grid import column_lookup, column_range, min_image
 from parsim.core.sdbd.ties import push_event
@@ -42,7 +44,7 @@ def fall(n, particle, n_c, work, sediment, grid, settings, event_counts):
     n_dr = n_c
     for l in range(n_c):
         copy_contact(contacts, l, work.released, l)
-    n_t, drop, tol = fall_events(n, particle, sediment, grid, settings.ell, window)
+    n_t, drop, tol = fall_events(n, particle, sediment, grid, settings.ell, window, work.counters)
     particle.com[2] -= drop
     for i in range(n):
         pos[i, 2] -= drop
@@ -65,14 +67,15 @@ def fall(n, particle, n_c, work, sediment, grid, settings, event_counts):
 
 
 @jit(inline="always")
-def fall_events(n, particle, sediment, grid, ell, window):
+def fall_events(n, particle, sediment, grid, ell, window, counters):
     """Fill the event window (:mod:`.ties`) with the smallest drop of the falling particle
     and those within ``tolz = SIMULTANEOUS_TOL * ell`` of it; returns ``(n_t, best, tolz)``,
     ``best`` the drop.
 
     The floor is a candidate for every sphere.  The grid columns under each sphere are
     scanned from their top layer down (the height map), and a column stops as soon as a
-    layer lies below the best drop found, so the cost does not grow with the pile.
+    layer lies below the best drop found, so the cost does not grow with the pile.  The
+    spheres tested are counted in ``counters`` (:mod:`.counters`).
     """
     pos = particle.centre
     rad = particle.radius
@@ -125,6 +128,7 @@ def fall_events(n, particle, sediment, grid, ell, window):
                             break
                         j = head[iz, col]
                         while j >= 0:
+                            counters_add(counters, FALL_CANDIDATES, 1)
                             rx = sed[j, 0] - xi
                             ry = sed[j, 1] - yi
                             mx, my = min_image(geom, igeom, rx, ry)

@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from parsim.core.jit import jit
+from parsim.core.sdbd import counters
 from parsim.core.sdbd.bundles import geometry_arrays, grid_arrays, window_arrays
 from parsim.core.sdbd.constants import (
     CHUNK_CELLS,
@@ -107,12 +108,18 @@ def roll(n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_c
         n_t, best = _release_events(particle.com, k, m, work, axis, pivot, settings, n_t, best, tol_phi)
     trial_angle = settings.trial_angle
     if trial_angle > 0.0 and trial_angle <= best + tol_phi:
-        if decision_changes(motion, n_pivots, k, m, work.geometry, particle.com, axis, pivot,
-                            trial_angle, work, settings):
+        started = counters.start(work.counters)
+        changes = decision_changes(motion, n_pivots, k, m, work.geometry, particle.com, axis, pivot,
+                                   trial_angle, work, settings)
+        counters.stop(work.counters, counters.TRIAL, started)
+        counters.add(work.counters, counters.TRIAL_DECISIONS, 1)
+        if changes:
             n_t, best = push_event(n_t, best, tol_phi, trial_angle, math.cos(trial_angle),
                                    math.sin(trial_angle), EV_TRIAL, -1, -1, -1, 0.0, 0.0, window)
+    started = counters.start(work.counters)
     n_t, best, buf = _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment,
                                          grid, settings, n_t, best, tol_phi, buf)
+    counters.stop(work.counters, counters.CONTACT_SEARCH, started)
     n_c, n_executed, n_chunk_ends, floor_hit = _execute(n, particle, n_pivots, work, axis, pivot, n_t,
                                                         best, tol_phi, event_counts)
     return n_c, n_dr, n_executed, n_chunk_ends, floor_hit, n_t, best, buf
@@ -349,12 +356,16 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
         # sediment spheres (the most frequent grid query: grid_collect here rather than
         # grid_collect_growing, measured 8% faster)
         reach = ri + reach_sed
+        started = counters.start(work.counters)
         while True:
             cnt = grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, o0 + xlo - reach, o0 + xhi + reach, o1 + ylo - reach, o1 + yhi + reach,
                                o2 + zlo - reach, o2 + zhi + reach, buf)
             if cnt >= 0:
                 break
             buf = np.empty(2 * buf.shape[0], dtype=np.int64)
+        counters.stop(work.counters, counters.GRID, started)
+        counters.add(work.counters, counters.GRID_QUERIES, 1)
+        counters.add(work.counters, counters.ROLL_CANDIDATES, cnt)
         for qq in range(cnt):
             j = buf[qq]
             rx = sed[j, 0] - pos[i, 0]
@@ -383,6 +394,7 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
                     continue
                 if find_contact(n_dr, released, i, OB_SPHERE, j) >= 0:
                     pol = POLICY_TRUSTED
+            counters.add(work.counters, counters.ROLL_ENTRIES, 1)
             phi, cc, ss = first_entry(A, B, K, gap, dist / rho, ell, pol)
             if phi <= best + tol_phi:
                 n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, OB_SPHERE, j,
