@@ -108,3 +108,52 @@ def test_stamp_covers_every_core_module(tmp_path):
     (tmp_path / "sub" / "callee.py").write_text("y = 2\n")
     assert _core_sources_digest(tmp_path) != before
     _core_sources_digest.cache_clear()
+
+
+# Compile parsim's kernel heap_new, a function of another package and a failing compilation, in a
+# fresh process with an empty cache; report the collector's thresholds seen during and after each.
+COLLECTOR_PROBE = """
+import gc, json
+import numba
+from numba.core import event
+from parsim.core.eventqueue import heap_new
+from parsim.core.jit import COMPILATION_GC_THRESHOLD
+
+during = []
+class Seen(event.Listener):  # registered after parsim's listener, so it sees what that one set
+    def on_start(self, ev):
+        during.append(gc.get_threshold())
+    def on_end(self, ev):
+        pass
+event.register("numba:compile", Seen())
+
+def phase(call):
+    during.clear()
+    try:
+        call()
+    except numba.TypingError:
+        pass
+    return {"during": sorted(set(during)), "after": gc.get_threshold()}
+
+gc.set_threshold(500, 5, 5)  # the process's own setting
+report = {"compilation": list(COMPILATION_GC_THRESHOLD),
+          "parsim": phase(lambda: heap_new(4)),
+          "failed": phase(lambda: heap_new("four")),
+          "other": phase(lambda: numba.njit(lambda x: x + 1)(1))}
+print(json.dumps(report))
+"""
+
+
+def test_the_collector_runs_less_often_only_while_a_kernel_compiles(tmp_path):
+    env = {key: value for key, value in os.environ.items() if key not in ("NUMBA_CACHE_DIR", "NUMBA_DISABLE_JIT")}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    done = subprocess.run([sys.executable, "-c", COLLECTOR_PROBE], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    own, compiling = [500, 5, 5], report["compilation"]
+    assert compiling != own
+    # heap_new and the numba functions it calls compile with the raised thresholds; the process's are back after
+    assert report["parsim"] == {"during": [compiling], "after": own}
+    assert report["failed"] == {"during": [compiling], "after": own}  # a typing error ends the compilation too
+    assert report["other"] == {"during": [own], "after": own}  # a function outside parsim/core: untouched
