@@ -111,7 +111,12 @@ INITIAL_NEIGHBOURS = 8
 
 STOP_REASONS = ("single_cluster", "max_time", "max_events")
 _SINGLE, _MAX_TIME, _MAX_EVENTS = 0, 1, 2
-_PAIR, _WALL, _REBIN = 0, 1, 2
+# Constants that kernels pass to other kernels are numpy scalars, not Python ints or bools:
+# numba types a Python constant argument as a literal and compiles a separate copy of the
+# callee for each value (heap_push was compiled seven times).
+_PAIR, _WALL, _REBIN = np.int64(0), np.int64(1), np.int64(2)  # event kinds
+_UNUSED = np.int64(0)  # a payload field that an event kind does not use
+_GREATER_ONLY, _ANY_PARTNER = np.bool_(True), np.bool_(False)  # _attach's only_greater
 
 
 class EDResult(NamedTuple):
@@ -345,7 +350,7 @@ def _rebin_cluster(c, t, state, Xb, grid, own, nbr, lists, x):
                 alone = False
                 break
         if not alone:
-            nbr = _attach(k, False, Xb, R, cl, skin, grid, nbr, nn, inb, bnext, bhead, btail)
+            nbr = _attach(k, _ANY_PARTNER, Xb, R, cl, skin, grid, nbr, nn, inb, bnext, bhead, btail)
         k = nxt[k]
     k = head[c]
     while k >= 0:
@@ -427,10 +432,10 @@ def _predict_cluster(c, t, max_time, L, h, state, lists, nbr, ht, hs, hd, size, 
         k = bnext[k]
     te, axis, side = _wall_event(c, t, O, V, T0, lo, hi, L)
     if te <= horizon and te < np.inf:
-        size = heap_push(ht, hs, hd, size, te, seq, _WALL, c, axis * 2 + side, vc, 0)
+        size = heap_push(ht, hs, hd, size, te, seq, _WALL, c, axis * 2 + side, vc, _UNUSED)
         seq += 1
     if t_rebin <= max_time and t_rebin < np.inf:
-        size = heap_push(ht, hs, hd, size, t_rebin, seq, _REBIN, c, 0, vc, 0)
+        size = heap_push(ht, hs, hd, size, t_rebin, seq, _REBIN, c, _UNUSED, vc, _UNUSED)
         seq += 1
     return ht, hs, hd, size, seq
 
@@ -493,15 +498,15 @@ def _simulate(X0, V0, R, m, L, max_time, max_events, skin, k_side, side, record)
     btail = np.full(n, -1, dtype=np.int64)
     lists = (nn, inb, bnext, bhead, btail, skin)
     for i in range(n):
-        nbr = _attach(i, True, Xb, R, cl, skin, grid, nbr, nn, inb, bnext, bhead, btail)
+        nbr = _attach(i, _GREATER_ONLY, Xb, R, cl, skin, grid, nbr, nn, inb, bnext, bhead, btail)
 
     # Initial events.
     n_pairs = 0
     for i in range(n):
         n_pairs += nn[i]
     ht, hs, hd = heap_new(max(1024, n_pairs // 2 + 2 * n))  # bound on the initial events
-    size = 0
-    seq = 0
+    size = np.int64(0)  # not literals, whose first typing would compile extra copies of the callees
+    seq = np.int64(0)
     t = 0.0
     for i in range(n):
         horizon = min(trb[i], max_time)
@@ -514,10 +519,10 @@ def _simulate(X0, V0, R, m, L, max_time, max_events, skin, k_side, side, record)
                     seq += 1
         te, axis, sd = _wall_event(i, t, O, V, T0, lo, hi, L)
         if te <= horizon and te < np.inf:
-            size = heap_push(ht, hs, hd, size, te, seq, _WALL, i, axis * 2 + sd, ver[i], 0)
+            size = heap_push(ht, hs, hd, size, te, seq, _WALL, i, axis * 2 + sd, ver[i], _UNUSED)
             seq += 1
         if trb[i] <= max_time and trb[i] < np.inf:
-            size = heap_push(ht, hs, hd, size, trb[i], seq, _REBIN, i, 0, ver[i], 0)
+            size = heap_push(ht, hs, hd, size, trb[i], seq, _REBIN, i, _UNUSED, ver[i], _UNUSED)
             seq += 1
 
     n_links = max(n - 1, 0)
@@ -611,7 +616,7 @@ def _simulate(X0, V0, R, m, L, max_time, max_events, skin, k_side, side, record)
                     x[a] -= D[big, a]
                 _bin(k, x, Xb, grid)
                 _detach(k, nbr, nn)
-                nbr = _attach(k, False, Xb, R, cl, skin, grid, nbr, nn, inb, bnext, bhead, btail)
+                nbr = _attach(k, _ANY_PARTNER, Xb, R, cl, skin, grid, nbr, nn, inb, bnext, bhead, btail)
                 k = nxt[k]
             if record:
                 _cluster_momentum(big, m, V, head, nxt, mom_after[n_coll])
