@@ -1,13 +1,16 @@
-"""A task's wall_time measures its computation, not the compilation of the kernels."""
+"""A task's wall_time measures its computation, not the compilation of the kernels; the warm-up compiles
+them once per node."""
 
+import json
 import os
 import subprocess
 import sys
 
 import numpy as np
+import pytest
 import xarray as xr
 
-from tests.mpi import parsim_command
+from tests.mpi import parsim_command, run_mpi
 
 JOB = """
 name = "timing"
@@ -29,8 +32,43 @@ def test_first_task_is_timed_after_the_kernels_are_compiled(tmp_path):
     result = subprocess.run([sys.executable, *parsim_command("run", str(job), "--output", str(tmp_path / "out"))],
                             capture_output=True, text=True, env=environment, timeout=900)
     assert result.returncode == 0, result.stderr
-    assert "parsim: preparing the kernels (compiled once per machine" in result.stderr
+    assert "parsim: preparing the kernels (compiled once per installation and processor model" in result.stderr
     with xr.open_dataset(tmp_path / "out" / "timing.nc") as dataset:
         wall_time = dataset.wall_time.values.ravel()
     # Four realisations of one point cost about the same, milliseconds; compiling takes tens of seconds.
     assert wall_time.max() < 20 * np.median(wall_time) + 0.5, wall_time
+
+
+# The runner's warm-up on every rank of COMM_WORLD, from an empty cache (argv[1]): how many of
+# parsim's kernels each rank compiled.
+WARM_UP = """
+import os, sys
+os.environ["NUMBA_CACHE_DIR"] = sys.argv[1]  # before numba reads its configuration
+import json
+from mpi4py import MPI
+from numba.core import event
+from parsim.job import Job
+from parsim.runner import warm_up
+
+compiled = []
+class Count(event.Listener):
+    def on_start(self, ev):
+        compiled.append(ev.data["dispatcher"].py_func.__module__)
+    def on_end(self, ev):
+        pass
+event.register("numba:compile", Count())
+job = Job.from_dict({"name": "warm", "kind": "aggregation", "seed": 1, "realizations": 2,
+                     "parameters": {"method": "ed", "volume_fraction": 0.2, "n_spheres": 64}})
+warm_up(job, job.tasks(), False, MPI.COMM_WORLD)
+counts = MPI.COMM_WORLD.gather(sum(module.startswith("parsim.core") for module in compiled))
+if MPI.COMM_WORLD.Get_rank() == 0:
+    print(json.dumps(counts))
+"""
+
+
+@pytest.mark.mpi
+def test_one_rank_of_a_node_compiles_the_others_load(tmp_path):
+    result = run_mpi(["-c", WARM_UP, str(tmp_path / "numba_cache")], timeout=900)
+    assert result.returncode == 0, result.stderr
+    first, second = json.loads(result.stdout.strip().splitlines()[-1])
+    assert first > 0 and second == 0  # rank 1 found every kernel in the cache rank 0 filled
