@@ -9,12 +9,13 @@ candidate events) travels beside its bundle as a plain integer.  The run's scala
 are a named tuple (nothing to count).
 
 The functions of the loop are compiled into the one kernel (``inline="always"``): as
-separate functions they were 10 % slower again.  What remains, the reference counts of the
-bundles' arrays taken in every step, makes the kernel about 10 % slower than the same loop
-written as one function over sixty local arrays (``benchmarks/deposition.py``, 2026-11-25).
+separate functions they were 10 % slower again.
 
-:func:`new_workspace` allocates every bundle of the loop once per run, so that no step
-allocates memory.
+The arrays in a bundle are borrowed views (:mod:`.borrowed`), which numba does not
+reference-count: reading them costs no atomic operation.  A bundle that allocates holds the
+arrays they borrow from in its ``memory`` field, so that they live as long as the bundle.
+:func:`new_workspace`, :func:`new_particle` and :func:`new_sediment` allocate every bundle of
+the loop once per run, so that no step allocates memory.
 """
 
 import sys
@@ -25,6 +26,7 @@ from numba.core import types
 from numba.experimental import structref
 
 from parsim.core.jit import jit
+from parsim.core.sdbd.borrowed import borrowed, carve, carve_rows
 from parsim.core.sdbd.constants import MAX_CONTACTS, MAX_TIES
 
 __all__ = [
@@ -39,9 +41,11 @@ __all__ = [
     "Scratch",
     "Workspace",
     "Record",
-    "new_contact_list",
-    "new_contact_geometry",
     "new_workspace",
+    "new_particle",
+    "new_sediment",
+    "new_grid",
+    "set_grid_arrays",
     "grid_arrays",
     "geometry_arrays",
     "window_arrays",
@@ -71,7 +75,7 @@ def bundle(name, fields, module=__name__):
 #: frame and ``radius`` (n,), both scaled; ``centre`` (n, 3) the sphere centres in the lab
 #: frame, ``com`` (3,) the centre of mass, ``quaternion`` (4,) and ``rotation`` (3, 3) its
 #: orientation.  Rows beyond the particle's number of spheres are unused.
-Particle = bundle("Particle", ["body", "radius", "centre", "com", "quaternion", "rotation"])
+Particle = bundle("Particle", ["body", "radius", "centre", "com", "quaternion", "rotation", "memory"])
 
 #: A list of contacts, one row each (see :mod:`.contacts`): moving sphere ``sphere`` touches
 #: an obstacle of kind ``obstacle`` (``OB_*``); ``sediment`` is the sediment sphere (``-1``
@@ -92,14 +96,14 @@ EventWindow = bundle("EventWindow",
                          ["angle", "cos", "sin", "kind", "sphere", "obstacle", "sediment", "shift"])
 
 #: The frozen spheres: ``centre`` (N, 3) wrapped into the periodic box, ``radius`` (N,).
-Sediment = bundle("Sediment", ["centre", "radius"])
+Sediment = bundle("Sediment", ["centre", "radius", "memory"])
 
 #: The neighbour grid of the sediment, the arrays of :mod:`.grid` in its order (``head``,
 #: ``col_top``, ``hkeys`` and ``hval`` are replaced by larger ones as the pile grows, all of
-#: them when a particle with a larger sphere than the cell allows arrives).  Its cell
-#: ``geom[6]`` is the largest sphere diameter so far, so half of it bounds every sediment
-#: radius.
-Grid = bundle("Grid", ["geom", "igeom", "head", "col_top", "nxt", "hkeys", "hval", "counts"])
+#: them when a particle with a larger sphere than the cell allows arrives: :func:`set_grid_arrays`).
+#: Its cell ``geom[6]`` is the largest sphere diameter so far, so half of it bounds every
+#: sediment radius.  ``memory`` holds the arrays the fields borrow from, in the same order.
+Grid = bundle("Grid", ["geom", "igeom", "head", "col_top", "nxt", "hkeys", "hval", "counts", "memory"])
 
 #: The parameters of a run: floor mode (``FLOOR_*``), trial angle of 4.1 (0: off), the
 #: virtual small rotation of eq. 31, criterion (34)'s ``cycle_n`` and ``cycle_eps``, the
@@ -121,9 +125,9 @@ Scratch = bundle("Scratch", ["axis", "pivot", "e1", "e2", "normal", "normal_2", 
 #: ``contacts``, their ``geometry``, the ``pivots`` of a rotation and the contacts
 #: ``released`` by the last decision, the ``trial`` geometry of the pivots after a trial
 #: rotation (4.1), the event ``window``, ``scratch``, and the run's ``counters``
-#: (:mod:`.counters`; empty when not counting).
+#: (:mod:`.counters`; empty when not counting); ``memory`` holds what they all borrow from.
 Workspace = bundle("Workspace", ["contacts", "geometry", "pivots", "released", "trial", "window",
-                                     "scratch", "counters"])
+                                     "scratch", "counters", "memory"])
 
 #: The output of a run, preallocated for all particles: per sphere ``positions`` (lab
 #: frame, wrapped into a periodic box), ``radii`` and ``particle`` index; per particle the
@@ -135,32 +139,144 @@ Record = bundle("Record", ["positions", "radii", "particle", "com", "rotation", 
                            "events", "steps"])
 
 
-@jit
-def new_contact_list(size):
-    """An empty contact list of ``size`` rows."""
-    return ContactList(np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64),
-                       np.empty(size, dtype=np.int64), np.zeros((size, 3)))
+# The numbers in the workspace's memory: contact lists (a sphere, an obstacle and a sediment sphere
+# per row, and a shift of three) of MAX_CONTACTS rows for the contacts and those released, of two
+# for the pivots; contact geometries (three vectors, two numbers and a kind per row) of
+# MAX_CONTACTS rows and of two for the trial rotation; the event window (three numbers, four
+# integers and a shift of two per row); and the scratch vectors.
+_LIST_ROWS = 2 * MAX_CONTACTS + 2
+_GEOMETRY_ROWS = MAX_CONTACTS + 2
+_SCRATCH_FLOATS = 7 * 3 + 2 * 4 + 2 * 8 + 3
+_WORKSPACE_FLOATS = 3 * _LIST_ROWS + 11 * _GEOMETRY_ROWS + 5 * MAX_TIES + _SCRATCH_FLOATS
+_WORKSPACE_INTS = 3 * _LIST_ROWS + _GEOMETRY_ROWS + 4 * MAX_TIES
 
 
-@jit
-def new_contact_geometry(size):
-    """Contact geometry of ``size`` rows."""
-    return ContactGeometry(np.empty((size, 3)), np.empty((size, 3)), np.empty((size, 3)),
-                           np.empty(size), np.empty(size), np.empty(size, dtype=np.int64))
+@jit(inline="always")
+def _contact_list(ints, floats, i, f, size):
+    """A contact list of ``size`` rows borrowed from ``ints`` and ``floats`` at ``i`` and ``f``;
+    returns it and the next free positions."""
+    sphere, i = carve(ints, i, size)
+    obstacle, i = carve(ints, i, size)
+    sediment, i = carve(ints, i, size)
+    shift, f = carve_rows(floats, f, size, 3)
+    return ContactList(sphere, obstacle, sediment, shift), i, f
+
+
+@jit(inline="always")
+def _contact_geometry(ints, floats, i, f, size):
+    """Contact geometry of ``size`` rows borrowed like :func:`_contact_list`."""
+    centre, f = carve_rows(floats, f, size, 3)
+    pivot, f = carve_rows(floats, f, size, 3)
+    normal, f = carve_rows(floats, f, size, 3)
+    reach, f = carve(floats, f, size)
+    level, f = carve(floats, f, size)
+    kind, i = carve(ints, i, size)
+    return ContactGeometry(centre, pivot, normal, reach, level, kind), i, f
+
+
+@jit(inline="always")
+def _event_window(ints, floats, i, f):
+    angle, f = carve(floats, f, MAX_TIES)
+    cos, f = carve(floats, f, MAX_TIES)
+    sin, f = carve(floats, f, MAX_TIES)
+    kind, i = carve(ints, i, MAX_TIES)
+    sphere, i = carve(ints, i, MAX_TIES)
+    obstacle, i = carve(ints, i, MAX_TIES)
+    sediment, i = carve(ints, i, MAX_TIES)
+    shift, f = carve_rows(floats, f, MAX_TIES, 2)
+    return EventWindow(angle, cos, sin, kind, sphere, obstacle, sediment, shift), i, f
+
+
+@jit(inline="always")
+def _scratch(floats, f):
+    axis, f = carve(floats, f, 3)
+    pivot, f = carve(floats, f, 3)
+    e1, f = carve(floats, f, 3)
+    e2, f = carve(floats, f, 3)
+    normal, f = carve(floats, f, 3)
+    normal_2, f = carve(floats, f, 3)
+    point, f = carve(floats, f, 3)
+    q_step, f = carve(floats, f, 4)
+    q_new, f = carve(floats, f, 4)
+    decision, f = carve(floats, f, 8)
+    trial_decision, f = carve(floats, f, 8)
+    trial_com, f = carve(floats, f, 3)
+    return Scratch(axis, pivot, e1, e2, normal, normal_2, point, q_step, q_new, decision, trial_decision,
+                   trial_com), f
 
 
 @jit
 def new_workspace(counters):
-    """Every bundle of :class:`Workspace`, allocated once per run, with the run's ``counters``."""
-    window = EventWindow(np.empty(MAX_TIES), np.empty(MAX_TIES), np.empty(MAX_TIES),
-                         np.empty(MAX_TIES, dtype=np.int64), np.empty(MAX_TIES, dtype=np.int64),
-                         np.empty(MAX_TIES, dtype=np.int64), np.empty(MAX_TIES, dtype=np.int64),
-                         np.zeros((MAX_TIES, 2)))
-    scratch = Scratch(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3),
-                      np.empty(3), np.empty(4), np.empty(4), np.empty(8), np.empty(8), np.empty(3))
-    return Workspace(new_contact_list(MAX_CONTACTS), new_contact_geometry(MAX_CONTACTS),
-                     new_contact_list(2), new_contact_list(MAX_CONTACTS), new_contact_geometry(2),
-                     window, scratch, counters)
+    """Every bundle of :class:`Workspace`, allocated once per run in one block of numbers and one of
+    integers (zero-filled), with the run's ``counters``."""
+    floats = np.zeros(_WORKSPACE_FLOATS)
+    ints = np.zeros(_WORKSPACE_INTS, dtype=np.int64)
+    contacts, i, f = _contact_list(ints, floats, 0, 0, MAX_CONTACTS)
+    geometry, i, f = _contact_geometry(ints, floats, i, f, MAX_CONTACTS)
+    pivots, i, f = _contact_list(ints, floats, i, f, 2)
+    released, i, f = _contact_list(ints, floats, i, f, MAX_CONTACTS)
+    trial, i, f = _contact_geometry(ints, floats, i, f, 2)
+    window, i, f = _event_window(ints, floats, i, f)
+    scratch, f = _scratch(floats, f)
+    return Workspace(contacts, geometry, pivots, released, trial, window, scratch, borrowed(counters),
+                     (floats, ints))
+
+
+@jit
+def new_particle(n_max):
+    """A :class:`Particle` of up to ``n_max`` spheres."""
+    floats = np.zeros(7 * n_max + 16)
+    body, f = carve_rows(floats, 0, n_max, 3)
+    radius, f = carve(floats, f, n_max)
+    centre, f = carve_rows(floats, f, n_max, 3)
+    com, f = carve(floats, f, 3)
+    quaternion, f = carve(floats, f, 4)
+    rotation, f = carve_rows(floats, f, 3, 3)
+    return Particle(body, radius, centre, com, quaternion, rotation, floats)
+
+
+@jit
+def new_sediment(n_max):
+    """An empty :class:`Sediment` for up to ``n_max`` spheres."""
+    floats = np.zeros(4 * n_max)
+    centre, f = carve_rows(floats, 0, n_max, 3)
+    radius, f = carve(floats, f, n_max)
+    return Sediment(centre, radius, floats)
+
+
+@jit
+def new_grid(geom, igeom, head, col_top, nxt, hkeys, hval, counts):
+    """The :class:`Grid` of the arrays of :mod:`.grid`, which it keeps alive."""
+    memory = (geom, igeom, head, col_top, nxt, hkeys, hval, counts)
+    return Grid(borrowed(geom), borrowed(igeom), borrowed(head), borrowed(col_top), borrowed(nxt),
+                borrowed(hkeys), borrowed(hval), borrowed(counts), memory)
+
+
+@jit(inline="always")
+def set_grid_arrays(grid, geom, igeom, head, col_top, nxt, hkeys, hval, counts):
+    """Make the grid's arrays these (each either the grid's own or a new one, which the grid keeps)."""
+    memory = grid.memory
+    grid.memory = (_owner(geom, grid.geom, memory[0]), _owner(igeom, grid.igeom, memory[1]),
+                   _owner(head, grid.head, memory[2]), _owner(col_top, grid.col_top, memory[3]),
+                   _owner(nxt, grid.nxt, memory[4]), _owner(hkeys, grid.hkeys, memory[5]),
+                   _owner(hval, grid.hval, memory[6]), _owner(counts, grid.counts, memory[7]))
+    grid.geom = borrowed(geom)
+    grid.igeom = borrowed(igeom)
+    grid.head = borrowed(head)
+    grid.col_top = borrowed(col_top)
+    grid.nxt = borrowed(nxt)
+    grid.hkeys = borrowed(hkeys)
+    grid.hval = borrowed(hval)
+    grid.counts = borrowed(counts)
+
+
+@jit(inline="always")
+def _owner(array, current, current_owner):
+    """What keeps ``array`` alive: the grid's own array if ``array`` is it (the same data),
+    else ``array`` itself, new from the grid's functions."""
+    if array.ctypes.data == current.ctypes.data:
+        return current_owner
+    return array
 
 
 @jit(inline="always")

@@ -11,6 +11,7 @@ descent goes on with them.
 import numpy as np
 
 from parsim.core.jit import jit
+from parsim.core.sdbd.borrowed import borrowed, carve
 from parsim.core.sdbd.bundles import bundle
 from parsim.core.sdbd.constants import CREEP_DESCENT, FLOOR_STOP, K_CYCLING
 from parsim.core.sdbd.contacts import near_contacts
@@ -34,8 +35,9 @@ CREEP_STEPS = 24
 
 #: ``decrements`` (HISTORY,) the positive decrements of the height of the centre of mass,
 #: ``recent`` (CREEP_STEPS,) the descents of the last steps (0 for a rise), both ring
-#: buffers; ``counts`` (2,) how many of each were recorded since the last reset.
-DescentHistory = bundle("DescentHistory", ["decrements", "recent", "counts"], module=__name__)
+#: buffers; ``counts`` (2,) how many of each were recorded since the last reset; ``memory``
+#: what they borrow from (:mod:`.borrowed`).
+DescentHistory = bundle("DescentHistory", ["decrements", "recent", "counts", "memory"], module=__name__)
 _DECREMENTS = 0
 _RECENT = 1
 
@@ -43,7 +45,11 @@ _RECENT = 1
 @jit
 def new_descent_history():
     """An empty history."""
-    return DescentHistory(np.empty(HISTORY), np.zeros(CREEP_STEPS), np.zeros(2, dtype=np.int64))
+    floats = np.zeros(HISTORY + CREEP_STEPS)
+    counts = np.zeros(2, dtype=np.int64)
+    decrements, f = carve(floats, 0, HISTORY)
+    recent, f = carve(floats, f, CREEP_STEPS)
+    return DescentHistory(decrements, recent, borrowed(counts), (floats, counts))
 
 
 @jit(inline="always")

@@ -53,7 +53,9 @@ import numpy as np
 from parsim.core.jit import jit
 from parsim.core.sdbd import counters
 from parsim.core.sdbd.bundles import grid_arrays
-from parsim.core.sdbd.bundles import Grid, Particle, Record, Sediment, Settings, new_workspace
+from parsim.core.sdbd.borrowed import borrowed
+from parsim.core.sdbd.bundles import (Record, Settings, new_grid, new_particle, new_sediment, new_workspace,
+                                      set_grid_arrays)
 from parsim.core.sdbd.constants import (
     EVENT_LIMIT,
     FLOOR_STOP,
@@ -129,13 +131,14 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
     settings = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
                         igeom[0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, debug)
-    grid = Grid(geom, igeom, head, col_top, nxt, hkeys, hval, counts)
-    record = Record(out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state, out_events,
-                    out_steps)
+    grid = new_grid(geom, igeom, head, col_top, nxt, hkeys, hval, counts)
+    # the caller keeps the outputs alive: the record borrows them
+    record = Record(borrowed(out_pos), borrowed(out_rad), borrowed(out_particle), borrowed(out_com),
+                    borrowed(out_rot), borrowed(out_contacts), borrowed(out_state), borrowed(out_events),
+                    borrowed(out_steps))
     n_sub = substrate_radius.shape[0]
-    sediment = Sediment(np.empty((max(n_sub + n_total, 1), 3)), np.empty(max(n_sub + n_total, 1)))
-    particle = Particle(np.empty((n_max, 3)), np.empty(n_max), np.empty((n_max, 3)), np.empty(3),
-                        np.empty(4), np.empty((3, 3)))
+    sediment = new_sediment(max(n_sub + n_total, 1))
+    particle = new_particle(n_max)
     work = new_workspace(tallies)
     run_started = counters.start(tallies)
     history = new_descent_history()
@@ -288,14 +291,7 @@ def _fit_grid(n, particle, sediment, n_sed, grid):
     for j in range(n_sed):
         head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j,
                                                  sed[j, 0], sed[j, 1], sed[j, 2])
-    grid.geom = geom
-    grid.igeom = igeom
-    grid.head = head
-    grid.col_top = col_top
-    grid.nxt = nxt
-    grid.hkeys = hkeys
-    grid.hval = hval
-    grid.counts = counts
+    set_grid_arrays(grid, geom, igeom, head, col_top, nxt, hkeys, hval, counts)
 
 
 @jit(inline="always")
@@ -324,12 +320,11 @@ def _join_sediment(j, x, y, z, r, sediment, grid):
     sediment.centre[j, 1] = wy
     sediment.centre[j, 2] = z
     sediment.radius[j] = r
-    head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy, z)
+    grown = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy, z)
     # the grid's arrays grow with the pile
-    grid.head = head
-    grid.col_top = col_top
-    grid.hkeys = hkeys
-    grid.hval = hval
+    if (grown[0].ctypes.data != head.ctypes.data or grown[1].ctypes.data != col_top.ctypes.data
+            or grown[2].ctypes.data != hkeys.ctypes.data or grown[3].ctypes.data != hval.ctypes.data):
+        set_grid_arrays(grid, geom, igeom, grown[0], grown[1], nxt, grown[2], grown[3], counts)
 
 
 @jit(inline="always")
