@@ -188,7 +188,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     return stopped_at, n_sed - n_sub
 
 
-@jit(inline="always")
+@jit  # not inlined: numba's inlining of this large function doubled the first compilation
 def _descend(n, particle, work, history, sediment, grid, settings, event_counts, traced, trace, buf):
     """Decide and move the particle of ``n`` spheres until it rests (steps 1-4 of the module
     docs).  Returns ``(state, n_c, n_steps, n_chunk_ends, worst_overlap, buf)``: its state
