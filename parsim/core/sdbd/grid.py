@@ -113,8 +113,7 @@ def column_lookup(igeom, hkeys, hval, ix, iy):
     mode = igeom[0]
     if mode == LATERAL_PERIODIC:
         ncx = igeom[1]
-        ncy = igeom[2]
-        return (ix % ncx) + ncx * (iy % ncy)
+        return _wrapped(ix, ncx) + ncx * _wrapped(iy, igeom[2])
     if mode == LATERAL_WALLS:
         if ix < 0 or iy < 0 or ix >= igeom[1] or iy >= igeom[2]:
             return -1
@@ -128,6 +127,18 @@ def column_lookup(igeom, hkeys, hval, ix, iy):
         if hkeys[k, 0] == ix and hkeys[k, 1] == iy:
             return v
         k = (k + 1) & mask
+
+
+@jit(inline="always")
+def _wrapped(i, n):
+    """``i % n`` (n > 0), without a division for the indices of a query: one period off at most."""
+    if i < 0:
+        i += n
+        return i if i >= 0 else i % n
+    if i >= n:
+        i -= n
+        return i if i < n else i % n
+    return i
 
 
 @jit
@@ -146,10 +157,16 @@ def wrap_position(geom, igeom, x, y):
 
 @jit
 def min_image(geom, igeom, dx, dy):
-    """Minimum-image lateral difference (unchanged for other boundaries)."""
+    """Minimum-image lateral difference (unchanged for other boundaries).
+
+    A difference within a quarter of the box's side is its own minimum image: there
+    ``floor(d / L + 0.5)`` is 0 whatever the rounding, so the division is skipped and the
+    result is bitwise that of the formula."""
     if igeom[0] == LATERAL_PERIODIC:
-        dx -= geom[2] * math.floor(dx / geom[2] + 0.5)
-        dy -= geom[3] * math.floor(dy / geom[3] + 0.5)
+        if abs(dx) >= 0.25 * geom[2]:
+            dx -= geom[2] * math.floor(dx / geom[2] + 0.5)
+        if abs(dy) >= 0.25 * geom[3]:
+            dy -= geom[3] * math.floor(dy / geom[3] + 0.5)
     return dx, dy
 
 
@@ -266,11 +283,20 @@ def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z
     iz1 = int(math.floor(z1 / geom[6]))
     cap = buf.shape[0]
     n = 0
+    periodic = igeom[0] == LATERAL_PERIODIC
+    ncx = igeom[1]
+    # periodic columns wrap by counting rather than by a division per column (the same columns)
+    wy = iy0 % igeom[2] if periodic else 0
     for iy in range(iy0, iy1 + 1):
+        wx = ix0 % ncx if periodic else 0
         for ix in range(ix0, ix1 + 1):
-            col = column_lookup(igeom, hkeys, hval, ix, iy)
-            if col < 0:
-                continue
+            if periodic:
+                col = wx + ncx * wy
+                wx = wx + 1 if wx + 1 < ncx else 0
+            else:
+                col = column_lookup(igeom, hkeys, hval, ix, iy)
+                if col < 0:
+                    continue
             top = col_top[col]
             if top < iz0:
                 continue
@@ -283,6 +309,8 @@ def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z
                     buf[n] = j
                     n += 1
                     j = nxt[j]
+        if periodic:
+            wy = wy + 1 if wy + 1 < igeom[2] else 0
     return n
 
 
