@@ -553,3 +553,61 @@ def test_released_contact_grazing_back_in_with_a_round_off_overlap():
                 if w >= 1e-5:
                     x = rotate(a, pivot, axis, 0.5 * phi)[0]
                     assert np.linalg.norm(x - s) - D > gap + 1e-12
+
+
+def _arc_range_by_arctangent(rho, e1k, e2k, phi_lim):
+    """The arc's extent by the arctangents of its extreme directions (the reference)."""
+    f0 = rho * e1k
+    f1 = rho * (e1k * math.cos(phi_lim) + e2k * math.sin(phi_lim))
+    lo, hi = min(f0, f1), max(f0, f1)
+    m = rho * math.sqrt(e1k * e1k + e2k * e2k)
+    th = math.atan2(e2k, e1k)
+    if th < 0.0:
+        th += 2.0 * math.pi
+    if th <= phi_lim:
+        hi = m
+    th += math.pi
+    if th >= 2.0 * math.pi:
+        th -= 2.0 * math.pi
+    if th <= phi_lim:
+        lo = -m
+    return lo, hi
+
+
+def test_arc_range_without_arctangents_is_bitwise_that_with_them():
+    from parsim.core.sdbd.events import arc_range
+
+    rng = np.random.default_rng(11)
+    specials = [0.0, -0.0, 1e-300, -1e-300, 1e-12, -1e-12, 1.0, -1.0]
+    for _ in range(20000):
+        e1k, e2k = rng.normal(size=2) * rng.choice([1.0, 1e-6, 1e-11])
+        if rng.random() < 0.2:
+            e2k = rng.choice(specials)
+        if rng.random() < 0.1:
+            e1k = rng.choice(specials)
+        phi_lim = rng.choice([rng.random() * math.pi, math.pi, math.pi - 1e-7, 1e-9,
+                              math.atan2(e2k, e1k) % (2.0 * math.pi)])
+        rho = rng.random() * 3.0
+        got = arc_range(rho, e1k, e2k, phi_lim, math.cos(phi_lim), math.sin(phi_lim))
+        assert got == _arc_range_by_arctangent(rho, e1k, e2k, phi_lim), (rho, e1k, e2k, phi_lim)
+
+
+def test_an_entry_beyond_the_limit_is_skipped_and_every_other_is_unchanged():
+    from parsim.core.sdbd.events import POLICY_NEW, POLICY_TRUSTED, first_entry
+
+    rng = np.random.default_rng(12)
+    skipped = 0
+    for _ in range(50000):
+        A, B = rng.normal(size=2)
+        K = rng.normal() * rng.choice([1.0, 1e-3])
+        gap = rng.choice([rng.random(), 0.0, 1e-12, -1e-12])
+        policy = POLICY_NEW if rng.random() < 0.5 else POLICY_TRUSTED
+        limit = rng.choice([rng.random() * math.pi, math.pi, 1e-9])
+        full = first_entry(A, B, K, gap, 1.0, 1.0, policy)
+        limited = first_entry(A, B, K, gap, 1.0, 1.0, policy, limit, math.cos(limit))
+        if limited[0] == np.inf and full[0] != np.inf:
+            assert full[0] > limit  # skipped: the caller would have discarded it
+            skipped += 1
+        else:
+            assert limited == full
+    assert skipped > 5000  # the shortcut does skip

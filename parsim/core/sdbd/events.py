@@ -122,34 +122,76 @@ def arc_frame(x, pivot, axis, e1, e2):
 
 
 @jit
-def arc_range(rho, e1k, e2k, phi_lim):
+def arc_range(rho, e1k, e2k, phi_lim, cos_lim, sin_lim):
     """Range of ``rho (e1k cos phi + e2k sin phi)`` over ``[0, phi_lim]``: the extent, along
     one coordinate, of the arc ``phi in [0, phi_lim]`` of a circle of :func:`arc_frame`
-    (``e1k, e2k`` the components of ``e1, e2``)."""
+    (``e1k, e2k`` the components of ``e1, e2``; ``cos_lim, sin_lim`` those of ``phi_lim``)."""
     f0 = rho * e1k
-    f1 = rho * (e1k * math.cos(phi_lim) + e2k * math.sin(phi_lim))
+    f1 = rho * (e1k * cos_lim + e2k * sin_lim)
     lo = min(f0, f1)
     hi = max(f0, f1)
-    m = rho * math.sqrt(e1k * e1k + e2k * e2k)
-    th = math.atan2(e2k, e1k)
-    if th < 0.0:
-        th += TWO_PI
-    if th <= phi_lim:
+    r = math.sqrt(e1k * e1k + e2k * e2k)
+    m = rho * r
+    if _direction_within(e2k, e1k, r, phi_lim, cos_lim, False):
         hi = m
-    th += math.pi
-    if th >= TWO_PI:
-        th -= TWO_PI
-    if th <= phi_lim:
+    if _direction_within(e2k, e1k, r, phi_lim, cos_lim, True):
         lo = -m
     return lo, hi
 
 
+@jit(inline="always")
+def _direction_within(y, x, r, lim, cos_lim, opposite):
+    """Does the angle of the direction ``(x, y)`` (of length ``r``; turned by pi if ``opposite``),
+    taken in ``[0, 2 pi)``, lie within ``[0, lim]``?  Where the answer is certain from the cosine
+    (the direction well away from the axis, ``lim`` well below pi) no arctangent is computed;
+    elsewhere the arctangent decides, as it always did."""
+    if lim < math.pi - _LIMIT_BELOW_PI and r > 0.0 and abs(y) > _COS_MARGIN * r:
+        if (y < 0.0) != opposite:
+            return False  # an angle in (pi, 2 pi)
+        cosine = (-x if opposite else x) / r
+        if cosine > cos_lim + _COS_MARGIN:
+            return True
+        if cosine < cos_lim - _COS_MARGIN:
+            return False
+    th = math.atan2(y, x)
+    if th < 0.0:
+        th += TWO_PI
+    if opposite:
+        th += math.pi
+        if th >= TWO_PI:
+            th -= TWO_PI
+    return th <= lim
+
+
+# An entry angle is known to lie beyond a limit without its arctangent when the limit is this far
+# below pi and the cosine this far below the limit's (the arctangent's error is ~1e-16).
+_LIMIT_BELOW_PI = 1e-6
+_COS_MARGIN = 1e-9
+NO_LIMIT = (np.inf, -2.0)
+"""``(limit, cos limit)`` of :func:`first_entry` that skips nothing."""
+
+
+@jit(inline="always")
+def _beyond(c, s, limit, cos_limit, wraps):
+    """Is the angle of ``(c, s)`` in ``[0, 2 pi)`` certainly above ``limit``?  A cheap test that
+    answers True only where ``atan2`` would give an angle above ``limit`` (``limit`` well below
+    pi).  ``wraps``: an angle just below 2 pi counts as 0 (:func:`first_entry`), so a negative
+    sine is beyond only away from it."""
+    if limit >= math.pi - _LIMIT_BELOW_PI:
+        return False
+    if s < 0.0:
+        return not wraps or c < 0.0 or s < -2.0 * ANGLE_EPS
+    return c < cos_limit - _COS_MARGIN
+
+
 @jit
-def circle_entry(A, B, K):
+def circle_entry(A, B, K, limit=np.inf, cos_limit=-2.0):
     """First entry ``phi in [0, 2 pi)`` into ``A cos phi + B sin phi > K``.
 
     Returns ``(phi, cos phi, sin phi)``; ``phi = inf`` when the circle never enters
-    (``K >= M``, including the tangent case, which touches without overlapping).
+    (``K >= M``, including the tangent case, which touches without overlapping), or when
+    the entry certainly lies beyond ``limit`` (of cosine ``cos_limit``): then no arctangent
+    is computed (:func:`_beyond`; an entry just below 2 pi is kept, it counts as 0).
     """
     M2 = A * A + B * B
     if M2 == 0.0:
@@ -163,6 +205,8 @@ def circle_entry(A, B, K):
     S = math.sqrt((M - K) * (M + K))
     c = (A * K + B * S) / M2
     s = (B * K - A * S) / M2
+    if _beyond(c, s, limit, cos_limit, True):
+        return np.inf, 1.0, 0.0
     phi = math.atan2(s, c)
     if phi < 0.0:
         phi += TWO_PI
@@ -170,8 +214,10 @@ def circle_entry(A, B, K):
 
 
 @jit
-def first_entry(A, B, K, gap, gscale, ell, policy):
-    """Event angle of one obstacle along the circle, with the touching rules.
+def first_entry(A, B, K, gap, gscale, ell, policy, limit=np.inf, cos_limit=-2.0):
+    """Event angle of one obstacle along the circle, with the touching rules; ``inf`` also when
+    the event certainly lies beyond ``limit`` (of cosine ``cos_limit``; :func:`circle_entry`),
+    where a caller discards it anyway, so that no arctangent is computed for it.
 
     ``gap`` is the present clearance (length) and ``gscale`` converts lengths into units
     of ``f`` (``|x - s| / rho`` for a sphere, ``1 / rho`` for a plane).  When the point
@@ -213,11 +259,13 @@ def first_entry(A, B, K, gap, gscale, ell, policy):
             M2 = A * A + B * B
             c = (A * A - B * B) / M2
             s = 2.0 * A * B / M2
+            if _beyond(c, s, limit, cos_limit, False):
+                return np.inf, 1.0, 0.0
             phi = math.atan2(s, c)
             if phi < 0.0:
                 phi += TWO_PI
             return phi, c, s
-    phi, c, s = circle_entry(A, B, K)
+    phi, c, s = circle_entry(A, B, K, limit, cos_limit)
     if phi == np.inf:
         return phi, c, s
     if touching:

@@ -307,12 +307,15 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
         lim = best + tol_phi
         if lim > math.pi:
             lim = math.pi
+        # events beyond lim are discarded: first_entry skips their arctangents
+        cos_lim = math.cos(lim)
+        sin_lim = math.sin(lim)
         o0 = pivot[0] + h * axis[0]
         o1 = pivot[1] + h * axis[1]
         o2 = pivot[2] + h * axis[2]
-        xlo, xhi = arc_range(rho, e1[0], e2[0], lim)
-        ylo, yhi = arc_range(rho, e1[1], e2[1], lim)
-        zlo, zhi = arc_range(rho, e1[2], e2[2], lim)
+        xlo, xhi = arc_range(rho, e1[0], e2[0], lim, cos_lim, sin_lim)
+        ylo, yhi = arc_range(rho, e1[1], e2[1], lim, cos_lim, sin_lim)
+        zlo, zhi = arc_range(rho, e1[2], e2[2], lim, cos_lim, sin_lim)
         ri = rad[i]
         # floor
         if o2 + zlo - ri <= TOUCH_TOL * ell:
@@ -321,7 +324,7 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
                 A = -e1[2]
                 B = -e2[2]
                 gap = pos[i, 2] - ri
-                phi, cc, ss = first_entry(A, B, A + gap / rho, gap, 1.0 / rho, ell, pol)
+                phi, cc, ss = first_entry(A, B, A + gap / rho, gap, 1.0 / rho, ell, pol, lim, cos_lim)
                 if phi <= best + tol_phi:
                     n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, OB_FLOOR, -1,
                                            0.0, 0.0, window)
@@ -395,7 +398,7 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
                 if find_contact(n_dr, released, i, OB_SPHERE, j) >= 0:
                     pol = POLICY_TRUSTED
             counters.add(work.counters, counters.ROLL_ENTRIES, 1)
-            phi, cc, ss = first_entry(A, B, K, gap, dist / rho, ell, pol)
+            phi, cc, ss = first_entry(A, B, K, gap, dist / rho, ell, pol, lim, cos_lim)
             if phi <= best + tol_phi:
                 n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, OB_SPHERE, j,
                                        mx - rx, my - ry, window)
