@@ -100,7 +100,7 @@ __all__ = ["contact_opens", "decide"]
 _SAME_PIVOT = 1e-9
 
 
-@jit
+@jit(inline="always")
 def contact_opens(l, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, cc0, ell):
     """Does contact ``l`` open (or stay closed) under the rotation ``omega = w`` about ``p``?"""
     r0 = ca[l, 0] - p0
@@ -131,7 +131,7 @@ def contact_opens(l, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, cc0, ell):
     return g1 - g0 >= -PROBE_TOL * ell
 
 
-@jit
+@jit(inline="always")
 def _all_open(n_c, skip1, skip2, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, cc0, ell):
     for l in range(n_c):
         if l == skip1 or l == skip2:
@@ -141,7 +141,7 @@ def _all_open(n_c, skip1, skip2, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, 
     return True
 
 
-@jit
+@jit(inline="always")
 def _descends(rate, lever, ell):
     """Does a rotation lower the centre of mass?  ``rate`` is -dz/dphi of the centre of mass
     for a unit axis, ``lever`` its distance from the axis: both the slope ``rate / lever``
@@ -151,7 +151,7 @@ def _descends(rate, lever, ell):
     return rate > DESCENT_TOL * lever and rate > DESCENT_RATE_TOL * ell
 
 
-@jit
+@jit(inline="always")
 def _offset_from_pivot(com, cP, k):
     """``d = r_cm - P_k``, its length and the length of its horizontal part."""
     d0 = com[0] - cP[k, 0]
@@ -160,13 +160,13 @@ def _offset_from_pivot(com, cP, k):
     return d0, d1, d2, math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), math.sqrt(d0 * d0 + d1 * d1)
 
 
-@jit
+@jit(inline="always")
 def _slides(ckind, l, sliding_walls):
     """Is contact ``l`` a frictionless wall (a pivot at infinity)?"""
     return sliding_walls and ckind[l] >= OB_WALL_XLO
 
 
-@jit
+@jit(inline="always")
 def _pair_axis(cP, cN, ckind, k, m, sliding_walls, ell):
     """The axis through the pivots of contacts ``k`` and ``m``: ``(True, u, b)``, ``u`` its
     unit vector (from pivot ``k`` to pivot ``m``, or along a frictionless wall's normal) and

@@ -90,7 +90,7 @@ POLICY_NEW = 0
 POLICY_TRUSTED = 1
 
 
-@jit
+@jit(inline="always")
 def arc_frame(x, pivot, axis, e1, e2):
     """Circle of ``x`` about the axis: returns ``(h, rho)`` and writes ``e1, e2``.
 
@@ -298,7 +298,7 @@ def sphere_coefficients(x, pivot, axis, s, D, e1, e2):
     return A, B, K, rho, math.sqrt(dist2)
 
 
-@jit
+@jit(inline="always")
 def plane_coefficients(x, pivot, axis, normal, c0, e1, e2):
     """Coefficients of (*) for the point ``x`` crossing to ``normal . x < c0``.
 
@@ -399,7 +399,7 @@ def hanging_com_two(com, pivot, axis, out):
     return True
 
 
-@jit
+@jit(inline="always")
 def hang_cos_sin(com, pivot, axis):
     """Angle ``phi_hang`` of eqs. 18 / 32: the rotation bringing the centre of mass lowest.
 
@@ -451,7 +451,7 @@ def loss_position_eq17(a1, pivot, axis, out):
     out[2] = o2
 
 
-@jit
+@jit(inline="always")
 def release_plane(com, px, py, ay, y_is_sphere, normal_y, out_normal):
     """Eqs. 25-30: the plane whose crossing releases rolling on pivot ``x`` from contact ``y``.
 
@@ -521,7 +521,7 @@ def release_plane(com, px, py, ay, y_is_sphere, normal_y, out_normal):
     return True, True, c0, gap
 
 
-@jit
+@jit(inline="always")
 def sliding_wall_release_plane(com, px, ay, normal_y, out_normal):
     """Eqs. 25-30 for a frictionless wall ``y``: the plane whose crossing releases rolling on
     pivot ``x`` from the wall.

@@ -48,6 +48,7 @@ __all__ = [
     "column_lookup",
     "wrap_position",
     "min_image",
+    "periodic_image",
 ]
 
 _HASH_A = 0x9E3779B97F4A7C15 >> 1
@@ -157,16 +158,24 @@ def wrap_position(geom, igeom, x, y):
 
 @jit
 def min_image(geom, igeom, dx, dy):
-    """Minimum-image lateral difference (unchanged for other boundaries).
+    """Minimum-image lateral difference (unchanged for other boundaries)."""
+    return periodic_image(igeom[0] == LATERAL_PERIODIC, geom[2], geom[3], dx, dy)
+
+
+@jit
+def periodic_image(periodic, length_x, length_y, dx, dy):
+    """The minimum image of the lateral difference ``dx, dy`` in a periodic box of sides
+    ``length_x, length_y`` (unchanged if not ``periodic``): :func:`min_image` for the loops over
+    candidates, which read the box once (scalar arguments cost numba no reference counting).
 
     A difference within a quarter of the box's side is its own minimum image: there
     ``floor(d / L + 0.5)`` is 0 whatever the rounding, so the division is skipped and the
     result is bitwise that of the formula."""
-    if igeom[0] == LATERAL_PERIODIC:
-        if abs(dx) >= 0.25 * geom[2]:
-            dx -= geom[2] * math.floor(dx / geom[2] + 0.5)
-        if abs(dy) >= 0.25 * geom[3]:
-            dy -= geom[3] * math.floor(dy / geom[3] + 0.5)
+    if periodic:
+        if abs(dx) >= 0.25 * length_x:
+            dx -= length_x * math.floor(dx / length_x + 0.5)
+        if abs(dy) >= 0.25 * length_y:
+            dy -= length_y * math.floor(dy / length_y + 0.5)
     return dx, dy
 
 

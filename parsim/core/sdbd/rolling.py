@@ -51,6 +51,7 @@ from parsim.core.sdbd.constants import (
     K_SECOND_CONTACT,
     K_THIRD_CONTACT,
     K_WALL_CONTACT,
+    LATERAL_PERIODIC,
     MOTION_SINGLE,
     NZ_TOL,
     OB_FLOOR,
@@ -74,7 +75,7 @@ from parsim.core.sdbd.events import (
     sliding_wall_release_plane,
 )
 from parsim.core.sdbd.frustration import decision_changes
-from parsim.core.sdbd.grid import grid_collect, min_image
+from parsim.core.sdbd.grid import grid_collect, periodic_image
 from parsim.core.sdbd.particle import rotate_particle
 from parsim.core.sdbd.polygon import candidate_sides, side_gap_in_box, side_plane
 from parsim.core.sdbd.rotation import rotate_point
@@ -280,6 +281,9 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
     walls = settings.walls
     n_sides = igeom[3]
     reach_sed = 0.5 * geom[6]  # bounds every sediment radius
+    periodic = igeom[0] == LATERAL_PERIODIC
+    length_x = geom[2]
+    length_y = geom[3]
     pivots = work.pivots
     released = work.released
     scratch = work.scratch
@@ -373,7 +377,7 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
             j = buf[qq]
             rx = sed[j, 0] - pos[i, 0]
             ry = sed[j, 1] - pos[i, 1]
-            mx, my = min_image(geom, igeom, rx, ry)
+            mx, my = periodic_image(periodic, length_x, length_y, rx, ry)
             # obstacle relative to the pivot
             q0 = pos[i, 0] + mx - pivot[0]
             q1 = pos[i, 1] + my - pivot[1]

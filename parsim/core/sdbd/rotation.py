@@ -38,7 +38,7 @@ __all__ = [
 ]
 
 
-@jit
+@jit(inline="always")
 def rotate_point(x, pivot, axis, c, s, out):
     """Eq. 15: rotate point ``x`` about the unit ``axis`` through ``pivot``; writes ``out``."""
     r0 = x[0] - pivot[0]
@@ -83,7 +83,7 @@ def cos_sin_about(x, x_new, origin, axis):
     return c, s
 
 
-@jit
+@jit(inline="always")
 def quat_from_axis_cos_sin(axis, c, s, out):
     """Unit quaternion of the rotation by ``phi`` about the unit ``axis``, from ``(cos, sin)``."""
     if c >= 0.0:
@@ -100,7 +100,7 @@ def quat_from_axis_cos_sin(axis, c, s, out):
     out[3] = sh * axis[2]
 
 
-@jit
+@jit(inline="always")
 def quat_mul(a, b, out):
     """Hamilton product ``out = a b`` (apply ``b`` first, then ``a``); ``out`` may alias neither."""
     aw, ax, ay, az = a[0], a[1], a[2], a[3]
@@ -111,7 +111,7 @@ def quat_mul(a, b, out):
     out[3] = aw * bz + ax * by - ay * bx + az * bw
 
 
-@jit
+@jit(inline="always")
 def quat_normalize(q):
     """Scale ``q`` to unit length in place (``w >= 0`` is not enforced)."""
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
@@ -119,7 +119,7 @@ def quat_normalize(q):
         q[k] /= n
 
 
-@jit
+@jit(inline="always")
 def quat_to_matrix(q, m):
     """Rotation matrix of the unit quaternion ``q = (w, x, y, z)`` into ``m`` (3, 3)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
