@@ -224,7 +224,7 @@ PARAMETERS = (
     Parameter("cycle_eps", float, 1e-3, "1", "epsilon of the cycling criterion (34)", low=0.0, low_inclusive=False,
               high=1.0),
     Parameter("max_events_per_particle", int, 100_000, "1", "a particle needing more events stops the task "
-              "with an error naming it", low=1),
+              "with an error naming it", low=1, high=sdbd.MAX_EVENT_LIMIT),
     Parameter("profile_bins", int, 50, "1", "number of slabs of the packing profile over 0 <= z <= 1.25 h",
               low=1, high=MAX_PROFILE_BINS, sweepable=False),
     Parameter("packing_samples", int, 200_000, "1", "quasi-Monte Carlo points per slab for the overlaps of "

@@ -91,6 +91,7 @@ from parsim.core.sdbd.constants import (
     EVENT_KINDS,
     EVENT_LIMIT,
     FLOOR_ROLL,
+    MAX_EVENT_LIMIT,
     FLOOR_STOP,
     HANGING_ONE,
     HANGING_TWO,
@@ -128,6 +129,7 @@ __all__ = [
     "HANGING_ONE",
     "HANGING_TWO",
     "EVENT_LIMIT",
+    "MAX_EVENT_LIMIT",
 ]
 
 
@@ -146,8 +148,8 @@ class DepositionResult(NamedTuple):
     state          (P,) int8 RESTING_THREE_CONTACTS, RESTING_ON_FLOOR, HANGING_ONE,
                    HANGING_TWO; EVENT_LIMIT is the condition of particle ``stopped_at``,
                    which is not included (the arrays hold the particles before it)
-    event_counts   (P, len(EVENT_KINDS)) int64 events per particle and kind
-    steps          (P,) int64 decide-and-move steps per particle (at most
+    event_counts   (P, len(EVENT_KINDS)) int32 events per particle and kind
+    steps          (P,) int32 decide-and-move steps per particle (at most
                    ``max_events_per_particle``)
     stopped_at     index of the particle that exceeded ``max_events_per_particle``, or -1
     clocked_seconds  wall-clock seconds spent on particles ``clock_from_particle`` onwards
@@ -204,7 +206,8 @@ def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_sc
     cycle_n, cycle_eps :
         Parameters ``(n, epsilon)`` of the cycling criterion (34); ``cycle_n = 0`` disables it.
     max_events_per_particle : int
-        The run stops at the first particle that needs more events (``stopped_at``).
+        The run stops at the first particle that needs more events (``stopped_at``); at most
+        ``MAX_EVENT_LIMIT`` (10^7), so that a particle's event counts fit 32 bits.
     clock_from_particle : int
         Measure the wall-clock time spent on particles from this index on
         (``clocked_seconds``); -1: no clock.
@@ -263,7 +266,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     start = np.ascontiguousarray(shape_start, dtype=np.int64)
     pshape = np.ascontiguousarray(particle_shape, dtype=np.int64)
     pscale = np.ascontiguousarray(particle_scale, dtype=np.float64)
-    prot = np.array(particle_rotation, dtype=np.float64, copy=True)
+    prot = np.ascontiguousarray(particle_rotation, dtype=np.float64)  # read, not written
     pxy = np.ascontiguousarray(particle_drop_xy, dtype=np.float64)
     lo = np.asarray(box_lower_xy, dtype=np.float64)
     hi = np.asarray(box_upper_xy, dtype=np.float64)
@@ -285,10 +288,8 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
         raise ValueError(f"particle_scale must have shape ({P},) with finite values > 0")
     if prot.shape != (P, 4) or not np.all(np.isfinite(prot)):
         raise ValueError(f"particle_rotation must have shape ({P}, 4) with finite values")
-    norms = np.linalg.norm(prot, axis=1)
-    if np.any(norms < 1e-12):
+    if np.any(np.linalg.norm(prot, axis=1) < 1e-12):  # the kernel normalises them
         raise ValueError("particle_rotation must hold non-zero quaternions")
-    prot = np.ascontiguousarray(prot / norms[:, None])
     if pxy.shape != (P, 2) or not np.all(np.isfinite(pxy)):
         raise ValueError(f"particle_drop_xy must have shape ({P}, 2) with finite values")
     if lateral not in (LATERAL_PERIODIC, LATERAL_WALLS, LATERAL_NONE):
@@ -303,8 +304,9 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
         raise ValueError(f"cycle_n must be an integer in [0, 28], got {cycle_n}")
     if not (np.isfinite(cycle_eps) and cycle_eps > 0):
         raise ValueError(f"cycle_eps must be > 0, got {cycle_eps}")
-    if int(max_events_per_particle) != max_events_per_particle or max_events_per_particle < 1:
-        raise ValueError(f"max_events_per_particle must be an integer >= 1, got {max_events_per_particle}")
+    if int(max_events_per_particle) != max_events_per_particle or not 1 <= max_events_per_particle <= MAX_EVENT_LIMIT:
+        raise ValueError(f"max_events_per_particle must be an integer in [1, {MAX_EVENT_LIMIT}], "
+                         f"got {max_events_per_particle}")
 
     counts = np.diff(start)
     n_total = int(np.sum(counts[pshape])) if P else 0
@@ -334,7 +336,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
             s = pshape[p]
             o = pscale[p] * offsets[start[s]:start[s + 1]]
             r = pscale[p] * radii[start[s]:start[s + 1]]
-            quat_to_matrix(prot[p], matrix)
+            quat_to_matrix(prot[p] / np.linalg.norm(prot[p]), matrix)
             xy = pxy[p] + o @ matrix[:2, :].T
             tol = 1e-9 * ell
             if polygon is not None:
@@ -350,33 +352,36 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     # the cell bounds every sediment radius: the first particle's and the substrate's
     cell = 2.0 * pscale[0] * shape_rmax[pshape[0]] if P else 2.0 * r_max
     cell = max(cell, 2.0 * r_sub)
-    g = grid.grid_new(lateral, lo, hi, cell, n_total + len(sub_rad), polygon, n_sides)
-    out_pos = np.zeros((n_total, 3))
-    out_rad = np.zeros(n_total)
+    n_sub = len(sub_rad)
+    g = grid.grid_new(lateral, lo, hi, cell, n_total + n_sub, polygon, n_sides)
+    # the sediment's spheres, substrate first; after the run the particles' spheres are the result
+    sediment_centre = np.zeros((n_sub + n_total, 3))
+    sediment_radius = np.zeros(n_sub + n_total)
     out_particle = np.zeros(n_total, dtype=np.int64)
     out_com = np.zeros((P, 3))
     out_rot = np.zeros((P, 4))
-    out_contacts = np.zeros(P, dtype=np.int64)
-    out_state = np.zeros(P, dtype=np.int64)
-    out_events = np.zeros((P, N_EVENT_KINDS), dtype=np.int64)
-    out_steps = np.zeros(P, dtype=np.int64)
+    out_contacts = np.zeros(P, dtype=np.int8)
+    out_state = np.zeros(P, dtype=np.int8)
+    out_events = np.zeros((P, N_EVENT_KINDS), dtype=np.int32)
+    out_steps = np.zeros(P, dtype=np.int32)
     diag = np.full(4, np.nan)
     trace = np.full((max(int(trace_steps), 1), 16), np.nan)
     counts = np.zeros(counters.N_COUNTERS if count else 0, dtype=np.int64)
     stopped_at, n_written = engine.run_deposition(
         offsets, radii, start, pshape, pscale, prot, pxy, sub_pos, sub_rad, *g, int(floor), int(wall_contact), float(trial_angle),
         int(cycle_n), float(cycle_eps), int(max_events_per_particle), ell,
-        bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), out_pos, out_rad,
-        out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag, counts)
+        bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), sediment_centre,
+        sediment_radius, out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag,
+        counts)
     n_done = P if stopped_at < 0 else int(stopped_at)
     return DepositionResult(
-        positions=out_pos[:n_written],
-        radii=out_rad[:n_written],
+        positions=sediment_centre[n_sub:n_sub + n_written],
+        radii=sediment_radius[n_sub:n_sub + n_written],
         particle=out_particle[:n_written],
         center_of_mass=out_com[:n_done],
         rotation=out_rot[:n_done],
-        contacts=out_contacts[:n_done].astype(np.int8),
-        state=out_state[:n_done].astype(np.int8),
+        contacts=out_contacts[:n_done],
+        state=out_state[:n_done],
         event_counts=out_events[:n_done],
         steps=out_steps[:n_done],
         stopped_at=int(stopped_at),

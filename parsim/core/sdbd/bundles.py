@@ -14,8 +14,8 @@ separate functions they were 10 % slower again.
 The arrays in a bundle are borrowed views (:mod:`.borrowed`), which numba does not
 reference-count: reading them costs no atomic operation.  A bundle that allocates holds the
 arrays they borrow from in its ``memory`` field, so that they live as long as the bundle.
-:func:`new_workspace`, :func:`new_particle` and :func:`new_sediment` allocate every bundle of
-the loop once per run, so that no step allocates memory.
+:func:`new_workspace` and :func:`new_particle` allocate every bundle of the loop once per run, so
+that no step allocates memory.
 """
 
 import sys
@@ -43,7 +43,7 @@ __all__ = [
     "Record",
     "new_workspace",
     "new_particle",
-    "new_sediment",
+    "sediment_in",
     "new_grid",
     "set_grid_arrays",
     "grid_arrays",
@@ -95,8 +95,9 @@ ContactGeometry = bundle("ContactGeometry", ["centre", "pivot", "normal", "reach
 EventWindow = bundle("EventWindow",
                          ["angle", "cos", "sin", "kind", "sphere", "obstacle", "sediment", "shift"])
 
-#: The frozen spheres: ``centre`` (N, 3) wrapped into the periodic box, ``radius`` (N,).
-Sediment = bundle("Sediment", ["centre", "radius", "memory"])
+#: The frozen spheres: ``centre`` (N, 3) wrapped into the periodic box, ``radius`` (N,),
+#: borrowed from the caller's arrays.
+Sediment = bundle("Sediment", ["centre", "radius"])
 
 #: The neighbour grid of the sediment, the arrays of :mod:`.grid` in its order (``head``,
 #: ``col_top``, ``hkeys`` and ``hval`` are replaced by larger ones as the pile grows, all of
@@ -129,14 +130,12 @@ Scratch = bundle("Scratch", ["axis", "pivot", "e1", "e2", "normal", "normal_2", 
 Workspace = bundle("Workspace", ["contacts", "geometry", "pivots", "released", "trial", "window",
                                      "scratch", "counters", "memory"])
 
-#: The output of a run, preallocated for all particles: per sphere ``positions`` (lab
-#: frame, wrapped into a periodic box), ``radii`` and ``particle`` index; per particle the
-#: centre of mass ``com``, the orientation quaternion ``rotation``, the number of
-#: ``contacts`` and the ``state`` at rest (``RESTING_*``, ``HANGING_*``, ``EVENT_LIMIT``),
-#: the executed ``events`` by kind (``EVENT_KINDS``) and the number of decide-and-move
-#: ``steps``.
-Record = bundle("Record", ["positions", "radii", "particle", "com", "rotation", "contacts", "state",
-                           "events", "steps"])
+#: The output of a run besides the sediment's spheres, preallocated for all particles: per
+#: sphere the ``particle`` index; per particle the centre of mass ``com``, the orientation
+#: quaternion ``rotation``, the number of ``contacts`` and the ``state`` at rest
+#: (``RESTING_*``, ``HANGING_*``, ``EVENT_LIMIT``), the executed ``events`` by kind
+#: (``EVENT_KINDS``) and the number of decide-and-move ``steps``.
+Record = bundle("Record", ["particle", "com", "rotation", "contacts", "state", "events", "steps"])
 
 
 # The numbers in the workspace's memory: contact lists (a sphere, an obstacle and a sediment sphere
@@ -236,12 +235,10 @@ def new_particle(n_max):
 
 
 @jit
-def new_sediment(n_max):
-    """An empty :class:`Sediment` for up to ``n_max`` spheres."""
-    floats = np.zeros(4 * n_max)
-    centre, f = carve_rows(floats, 0, n_max, 3)
-    radius, f = carve(floats, f, n_max)
-    return Sediment(centre, radius, floats)
+def sediment_in(centre, radius):
+    """The :class:`Sediment` kept in the caller's ``centre`` (N, 3) and ``radius`` (N,), which the
+    caller keeps alive."""
+    return Sediment(borrowed(centre), borrowed(radius))
 
 
 @jit

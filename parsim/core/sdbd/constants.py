@@ -55,6 +55,9 @@ HANGING_ONE = 2
 HANGING_TWO = 3
 #: The particle needed more than ``max_events_per_particle`` events; the run stopped there.
 EVENT_LIMIT = 4
+#: The largest ``max_events_per_particle``: a step executes at most MAX_TIES events and closes
+#: at most MAX_CONTACTS contacts, so that a particle's event counts stay below 2^31 (int32).
+MAX_EVENT_LIMIT = 10_000_000
 
 STATE_NAMES = ("resting_three_contacts", "resting_on_floor", "hanging_one", "hanging_two",
                "event_limit")

@@ -45,6 +45,7 @@ The state the loop hands around is a set of named bundles (:mod:`.bundles`): the
 events, the sediment and its grid, and the run's settings.
 """
 
+import math
 import time
 
 import numba
@@ -54,7 +55,7 @@ from parsim.core.jit import jit
 from parsim.core.sdbd import counters
 from parsim.core.sdbd.bundles import grid_arrays
 from parsim.core.sdbd.borrowed import borrowed
-from parsim.core.sdbd.bundles import (Record, Settings, new_grid, new_particle, new_sediment, new_workspace,
+from parsim.core.sdbd.bundles import (Record, Settings, new_grid, new_particle, new_workspace, sediment_in,
                                       set_grid_arrays)
 from parsim.core.sdbd.constants import (
     EVENT_LIMIT,
@@ -98,20 +99,23 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
                    particle_rotation, particle_drop_xy, substrate_centre, substrate_radius,
                    geom, igeom, head, col_top, nxt, hkeys, hval, counts,
                    floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell,
-                   debug, trace_particle, trace, clock_from,
-                   out_pos, out_rad, out_particle, out_com, out_rot, out_contacts, out_state,
-                   out_events, out_steps, diag, tallies):
+                   debug, trace_particle, trace, clock_from, sediment_centre, sediment_radius,
+                   out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag, tallies):
     """Deposit all particles; returns ``(stopped_at, n_spheres_written)``.
 
     Inputs are validated by :func:`parsim.core.sdbd.deposit`.  The ``m`` spheres of the
     substrate (``substrate_centre`` (m, 3), ``substrate_radius`` (m,)) are sediment spheres
     ``0 .. m - 1`` before the first particle; the particles' spheres follow them.
     ``geom, igeom, head, ...`` is an empty grid from :func:`grid.grid_new` (for
-    ``m + len(out_rad)`` spheres) whose cell is at least the first particle's and the
+    ``len(sediment_radius)`` spheres) whose cell is at least the first particle's and the
     substrate's largest sphere diameter; it grows with the largest sphere so far
     (:func:`_fit_grid`), so that nothing of a particle's descent depends on the particles
-    after it.  ``out_*`` are preallocated outputs for all particles (a
-    :class:`.bundles.Record`, without the substrate); ``diag`` (4,) receives diagnostics
+    after it.  ``sediment_centre`` (m + n, 3) and ``sediment_radius`` (m + n,) hold the
+    sediment during the run and its spheres at the end: rows ``m`` on are the particles'
+    spheres in the lab frame (a periodic box holds each centre of mass wrapped into it and the
+    spheres about it, a sphere beyond the box included), so that the sediment is not kept
+    twice.  ``out_*`` are preallocated outputs for all particles (a :class:`.bundles.Record`);
+    ``diag`` (4,) receives diagnostics
     (largest overlap after a move when ``debug``, number of steps, number of chunk steps).
     The steps of particle ``trace_particle`` (``-1``: none) are recorded in the rows of
     ``trace`` (T, 16): motion, number of contacts before the step, pivot contacts k and m,
@@ -125,7 +129,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     n_max = 1
     for s in range(shape_start.shape[0] - 1):
         n_max = max(n_max, shape_start[s + 1] - shape_start[s])
-    n_total = out_rad.shape[0]
+    n_sub = substrate_radius.shape[0]
     # eq. 31: the virtual small rotation is the trial angle of 4.1 (the paper refers to
     # section 4.1 for it); VIRTUAL_ANGLE only when the trial test is disabled
     virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
@@ -133,11 +137,13 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
                         igeom[0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, debug)
     grid = new_grid(geom, igeom, head, col_top, nxt, hkeys, hval, counts)
     # the caller keeps the outputs alive: the record borrows them
-    record = Record(borrowed(out_pos), borrowed(out_rad), borrowed(out_particle), borrowed(out_com),
-                    borrowed(out_rot), borrowed(out_contacts), borrowed(out_state), borrowed(out_events),
-                    borrowed(out_steps))
-    n_sub = substrate_radius.shape[0]
-    sediment = new_sediment(max(n_sub + n_total, 1))
+    record = Record(borrowed(out_particle), borrowed(out_com), borrowed(out_rot), borrowed(out_contacts),
+                    borrowed(out_state), borrowed(out_events), borrowed(out_steps))
+    sediment = sediment_in(sediment_centre, sediment_radius)
+    # the spheres whose centre the periodic box wraps: sediment index and centre unwrapped
+    beyond_index = np.empty(16, dtype=np.int64)
+    beyond_centre = np.empty((16, 3))
+    n_beyond = 0
     particle = new_particle(n_max)
     work = new_workspace(tallies)
     run_started = counters.start(tallies)
@@ -178,8 +184,13 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
             worst_overlap = max(worst_overlap, overlap)
         started = counters.start(tallies)
         n_sed, top_z = _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, top_z, record)
+        n_beyond, beyond_index, beyond_centre = _note_wrapped(n, particle, sediment, n_sed, n_beyond,
+                                                              beyond_index, beyond_centre)
         counters.stop(tallies, counters.PARTICLE, started)
     counters.stop(tallies, counters.TOTAL, run_started)
+    for b in range(n_beyond):  # the sediment is done: its spheres as the particles hold them
+        for k in range(3):
+            sediment_centre[beyond_index[b], k] = beyond_centre[b, k]
     diag[D_MAX_OVERLAP] = worst_overlap
     diag[D_EVENTS] = n_steps
     diag[D_CHUNKS] = n_chunk_ends
@@ -346,11 +357,7 @@ def _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, top_z, rec
     pos = particle.centre
     rad = particle.radius
     for i in range(n):
-        j = n_sed - n_sub
-        for k in range(3):
-            record.positions[j, k] = pos[i, k]
-        record.radii[j] = rad[i]
-        record.particle[j] = p
+        record.particle[n_sed - n_sub] = p
         _join_sediment(n_sed, pos[i, 0], pos[i, 1], pos[i, 2], rad[i], sediment, grid)
         top_z = max(top_z, pos[i, 2] + rad[i])
         n_sed += 1
@@ -360,6 +367,41 @@ def _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, top_z, rec
     record.contacts[p] = n_c
     record.state[p] = state
     return n_sed, top_z
+
+
+@jit(inline="always")
+def _note_wrapped(n, particle, sediment, n_sed, n_beyond, beyond_index, beyond_centre):
+    """Note the spheres of the particle of ``n`` spheres just frozen (the last of the ``n_sed``
+    sediment spheres) whose centre in the sediment is not bitwise the particle's (a sphere
+    that the periodic box wraps); returns the new count and the arrays (grown by doubling)."""
+    for i in range(n):
+        j = n_sed - n + i
+        moved = False
+        for k in range(2):
+            a = particle.centre[i, k]
+            b = sediment.centre[j, k]
+            moved = moved or a != b or math.copysign(1.0, a) != math.copysign(1.0, b)
+        if not moved:
+            continue
+        if n_beyond == beyond_index.shape[0]:
+            beyond_index = _grown(beyond_index)
+            beyond_centre = _grown(beyond_centre)
+        beyond_index[n_beyond] = j
+        for k in range(3):
+            beyond_centre[n_beyond, k] = particle.centre[i, k]
+        n_beyond += 1
+    return n_beyond, beyond_index, beyond_centre
+
+
+@jit(inline="always")
+def _grown(array):
+    """A copy of ``array`` with twice its rows."""
+    grown = np.empty((2 * array.shape[0],) + array.shape[1:], dtype=array.dtype)
+    old = array.reshape(-1)
+    new = grown.reshape(-1)
+    for i in range(old.shape[0]):
+        new[i] = old[i]
+    return grown
 
 
 @jit(inline="always")

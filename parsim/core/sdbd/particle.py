@@ -32,9 +32,10 @@ def place_spheres(n, particle):
 @jit(inline="always")
 def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                   particle_rotation, particle_drop_xy, top_z, ell, particle):
-    """Particle ``p`` at its drop: scaled body offsets and radii, orientation, centre of mass
-    above its drop point with its lowest sphere ``DROP_MARGIN`` above the top of the sediment
-    ``top_z``; returns its number of spheres."""
+    """Particle ``p`` at its drop: scaled body offsets and radii, orientation (from
+    ``particle_rotation[p]``, any non-zero quaternion), centre of mass above its drop point
+    with its lowest sphere ``DROP_MARGIN`` above the top of the sediment ``top_z``; returns
+    its number of spheres."""
     body = particle.body
     rad = particle.radius
     q = particle.quaternion
@@ -50,6 +51,9 @@ def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, pa
         rad[i] = sc * shape_radii[i0 + i]
     for k in range(4):
         q[k] = particle_rotation[p, k]
+    # the given quaternion is made unit, then normalised as after a rotation: twice, as the
+    # sediments of the fingerprints were made (benchmarks/sediment_fingerprint.py)
+    quat_normalize(q)
     quat_normalize(q)
     quat_to_matrix(q, rot)
     below = 0.0
