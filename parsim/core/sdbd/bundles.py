@@ -9,7 +9,9 @@ candidate events) travels beside its bundle as a plain integer.  The run's scala
 are a named tuple (nothing to count).
 
 The functions of the loop are compiled into the one kernel (``inline="always"``): as
-separate functions they were 10 % slower again.
+separate functions they were 10 % slower again.  The exceptions are the descent of a particle
+and a rotation, large functions called once per particle and per step, whose inlining made
+the first compilation much longer and no kernel faster.
 
 The arrays in a bundle are borrowed views (:mod:`.borrowed`), which numba does not
 reference-count: reading them costs no atomic operation.  A bundle that allocates holds the

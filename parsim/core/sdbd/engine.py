@@ -216,7 +216,7 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
     geom = grid.geom
     ell = settings.ell
     forget_descents(history)
-    n_c = 0
+    n_c = np.int64(0)  # typed, not the literal 0: numba would compile decide() for the literal too
     rest_checked = False
     n_steps = 0
     n_chunk_ends = 0
