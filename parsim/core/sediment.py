@@ -28,6 +28,7 @@ box, so periodic wrapping changes nothing for them).
 
 import numpy as np
 
+from parsim.core.growth import with_rows
 from parsim.core.jit import jit
 from parsim.core.shapes.union import centre_of_mass_of_union
 
@@ -358,12 +359,8 @@ def _overlap_lists(centres, radii, tolerance, start, lower, upper, cells):
                             if dx * dx + dy * dy + dz * dz < reach * reach and reach > 0.0:
                                 if rows == capacity:
                                     capacity *= 2
-                                    grown = np.empty(capacity, dtype=np.int64)
-                                    grown[:rows] = neighbour[:rows]
-                                    neighbour = grown
-                                    grown_offset = np.empty((capacity, 3))
-                                    grown_offset[:rows] = offset[:rows]
-                                    offset = grown_offset
+                                    neighbour = with_rows(neighbour, capacity, rows)
+                                    offset = with_rows(offset, capacity, rows)
                                 neighbour[rows] = other
                                 offset[rows, 0], offset[rows, 1], offset[rows, 2] = dx, dy, dz
                                 rows += 1

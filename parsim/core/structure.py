@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from parsim.core.growth import with_rows
 from parsim.core.jit import jit
 from parsim.core.sediment import (CONTACT_GAP_TOLERANCE, OVERLAP_TOLERANCE, _columns_around, _SphereGrid,
                                   _minimum_image)
@@ -456,9 +457,7 @@ def _touching_in_cells(x, radii, particle, order, tolerance, overlap_cut, period
                                 dx, dy = image_x, image_y
                             if np.sqrt(dx * dx + dy * dy + dz * dz) - radii[first] - radii[second] < tolerance:
                                 if count == len(partner):
-                                    grown = np.empty(2 * len(partner), dtype=np.int64)
-                                    grown[:count] = partner[:count]
-                                    partner = grown
+                                    partner = with_rows(partner, 2 * len(partner), count)
                                 partner[count] = other
                                 contacts[order[first] + 1] += 1
                                 count += 1

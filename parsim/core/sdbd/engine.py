@@ -51,6 +51,7 @@ import time
 import numba
 import numpy as np
 
+from parsim.core.growth import with_rows
 from parsim.core.jit import jit
 from parsim.core.sdbd import counters
 from parsim.core.sdbd.bundles import grid_arrays
@@ -143,7 +144,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     # the spheres whose centre the periodic box wraps: sediment index and centre unwrapped
     beyond_index = np.empty(16, dtype=np.int64)
     beyond_centre = np.empty((16, 3))
-    n_beyond = 0
+    n_beyond = np.int64(0)
     particle = new_particle(n_max)
     work = new_workspace(tallies)
     run_started = counters.start(tallies)
@@ -384,24 +385,13 @@ def _note_wrapped(n, particle, sediment, n_sed, n_beyond, beyond_index, beyond_c
         if not moved:
             continue
         if n_beyond == beyond_index.shape[0]:
-            beyond_index = _grown(beyond_index)
-            beyond_centre = _grown(beyond_centre)
+            beyond_index = with_rows(beyond_index, 2 * n_beyond, n_beyond)
+            beyond_centre = with_rows(beyond_centre, 2 * n_beyond, n_beyond)
         beyond_index[n_beyond] = j
         for k in range(3):
             beyond_centre[n_beyond, k] = particle.centre[i, k]
         n_beyond += 1
     return n_beyond, beyond_index, beyond_centre
-
-
-@jit(inline="always")
-def _grown(array):
-    """A copy of ``array`` with twice its rows."""
-    grown = np.empty((2 * array.shape[0],) + array.shape[1:], dtype=array.dtype)
-    old = array.reshape(-1)
-    new = grown.reshape(-1)
-    for i in range(old.shape[0]):
-        new[i] = old[i]
-    return grown
 
 
 @jit(inline="always")

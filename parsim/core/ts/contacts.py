@@ -8,6 +8,7 @@ import numpy as np
 
 from parsim.core.celllist import (block_cells, build_cells, cell_index, forward_offsets, grid_size, move_to_cell,
                                   neighbour_offsets)
+from parsim.core.growth import with_rows
 from parsim.core.jit import jit
 from parsim.core.ts.links import are_linked
 
@@ -16,9 +17,7 @@ from parsim.core.ts.links import are_linked
 def _with_pair(pairs, count, i, j):
     """``pairs`` (grown if full) with ``(i, j)`` written at row ``count``."""
     if count == pairs.shape[0]:
-        bigger = np.empty((2 * pairs.shape[0] + 16, 2), dtype=np.int64)
-        bigger[:count] = pairs[:count]
-        pairs = bigger
+        pairs = with_rows(pairs, 2 * pairs.shape[0] + 16, count)
     pairs[count, 0] = i
     pairs[count, 1] = j
     return pairs
