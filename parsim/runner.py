@@ -208,11 +208,11 @@ def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None
     if not rehearsals:
         return
     if announce:
-        # Measured with benchmarks/compile.py on 2 shared cores of an AMD EPYC: the quick start 10-15 s,
-        # a time-stepping aggregation 22 s, the first deposition 72-122 s; loading from the cache 0.1-1 s.
+        # Measured with benchmarks/compile.py on 2 cores of an AMD EPYC: the quick start 9-15 s, a
+        # time-stepping aggregation 22 s, the first deposition 50-55 s; loading from the cache 0.1-1 s.
         print("parsim: preparing the kernels (compiled once per installation and processor model: 10-30 s for "
-              "an aggregation, 1-2 min for a deposition on 2 cores of an AMD EPYC; loaded from the cache in about "
-              "a second afterwards)...", file=sys.stderr, flush=True)
+              "an aggregation, about a minute for a deposition on one core of an AMD EPYC; loaded from the cache "
+              "in about a second afterwards)...", file=sys.stderr, flush=True)
     start = time.perf_counter()
     node = comm.Split_type(MPI.COMM_TYPE_SHARED) if comm is not None and comm.Get_size() > 1 else None
     if node is not None and node.Get_rank() > 0:

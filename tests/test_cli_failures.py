@@ -112,8 +112,10 @@ def test_a_failure_under_mpi_is_reported_once(job, tmp_path, target, action, ran
 @pytest.mark.parametrize("command", ["run", "validate"])
 def test_ctrl_c_while_the_job_is_read_is_one_line(job, tmp_path, command):
     script = patched_script(tmp_path, "parsim.job.load_job", "os.kill(os.getpid(), signal.SIGINT); time.sleep(30)")
+    # a test suite started in the background of a shell ignores SIGINT, and so would the child: undo that
     result = subprocess.run([sys.executable, script, command, str(job), "--output", str(tmp_path / "out")],
-                            capture_output=True, text=True, timeout=120)
+                            capture_output=True, text=True, timeout=120,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert result.returncode == 128 + signal.SIGINT
     assert len(lines(result.stderr)) == 1 and lines(result.stderr)[0].startswith("parsim: interrupted"), result.stderr
 

@@ -325,7 +325,7 @@ def folder_with_a_task(tmp_path) -> tuple[OutputFolder, Path]:
 def test_task_files_record_the_parsim_version_and_the_output_schema(tmp_path):
     _, path = folder_with_a_task(tmp_path)
     with h5py.File(path) as file:
-        assert file.attrs["parsim_version"] == parsim.__version__ == "0.5.0"
+        assert file.attrs["parsim_version"] == parsim.__version__ == "0.6.0"
         assert file.attrs["parsim_output_schema"] == OUTPUT_SCHEMA == 5
         assert file["statistics/box_length"][()] == 1.0
 

@@ -141,7 +141,9 @@ def wait_for_task_files(tasks: Path, count: int, process: subprocess.Popen, seco
 def test_ctrl_c_ends_every_rank_with_one_line_and_resumes(quickstart_two_ranks, tmp_path):
     # Ctrl-C in a terminal signals mpiexec, which forwards SIGINT to every rank.
     command = [mpiexec(), "-n", "2", sys.executable, *parsim_command("run", QUICKSTART, "--output", str(tmp_path), "--quiet")]
-    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # (SIGINT as in a terminal: a test suite started in the background of a shell ignores it)
+    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     wait_for_task_files(tmp_path / "tasks", 3, process)
     interrupted = time.monotonic()
     process.send_signal(signal.SIGINT)
