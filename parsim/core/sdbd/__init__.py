@@ -76,6 +76,13 @@ indices depend only on the particles before), so depositing ``n1`` particles and
 more on the first sediment as substrate gives, bitwise, the sediment of one run of ``n1 + n2``
 particles.
 
+Locality.  A particle is dropped with its lowest sphere ``DROP_MARGIN`` above the highest
+sediment sphere within its reach (its extent plus the largest sediment radius, laterally:
+:func:`.grid.top_near`), not above the whole sediment: its vertical fall cannot touch anything
+beyond that reach, and from there on it only meets what lies on its path.  So a particle's
+descent, bit for bit, depends only on the sediment near its path: particles dropped far apart do
+not influence each other, whatever the rest of the pile does.
+
 The numba cache of every kernel is stamped with all of :mod:`parsim.core`'s sources (see
 :mod:`parsim.core.cache`): editing :mod:`.decision`, :mod:`.events`, :mod:`.grid` or
 :mod:`.rotation` recompiles :func:`engine.run_deposition`.

@@ -150,7 +150,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     run_started = counters.start(tallies)
     history = new_descent_history()
     buf = np.empty(4096, dtype=np.int64)
-    n_sed, top_z = _lay_substrate(substrate_centre, substrate_radius, sediment, grid)
+    n_sed = _lay_substrate(substrate_centre, substrate_radius, sediment, grid)
     worst_overlap = -np.inf
     n_steps = 0
     n_chunk_ends = 0
@@ -161,7 +161,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
             clock_start = _wall_clock()
         started = counters.start(tallies)
         n = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                          particle_rotation, particle_drop_xy, top_z, ell, particle)
+                          particle_rotation, particle_drop_xy, sediment, grid, ell, particle)
         _fit_grid(n, particle, sediment, n_sed, grid)
         counters.stop(tallies, counters.PARTICLE, started)
         state, n_c, steps, chunk_ends, overlap, buf = _descend(
@@ -184,7 +184,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
             overlap, buf = max_overlap(n, particle, sediment, grid, settings.walls, buf)
             worst_overlap = max(worst_overlap, overlap)
         started = counters.start(tallies)
-        n_sed, top_z = _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, top_z, record)
+        n_sed = _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, record)
         n_beyond, beyond_index, beyond_centre = _note_wrapped(n, particle, sediment, n_sed, n_beyond,
                                                               beyond_index, beyond_centre)
         counters.stop(tallies, counters.PARTICLE, started)
@@ -341,33 +341,29 @@ def _join_sediment(j, x, y, z, r, sediment, grid):
 
 @jit(inline="always")
 def _lay_substrate(centre, radius, sediment, grid):
-    """The substrate's spheres are the first sediment spheres; returns their number and the top
-    of the sediment they make (0 without a substrate)."""
-    top_z = 0.0
+    """The substrate's spheres are the first sediment spheres; returns their number."""
     for j in range(radius.shape[0]):
         _join_sediment(j, centre[j, 0], centre[j, 1], centre[j, 2], radius[j], sediment, grid)
-        top_z = max(top_z, centre[j, 2] + radius[j])
-    return radius.shape[0], top_z
+    return radius.shape[0]
 
 
 @jit(inline="always")
-def _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, top_z, record):
+def _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, record):
     """Particle ``p`` at rest joins the sediment and the grid and is written to the record
     (whose spheres are the sediment's after the ``n_sub`` of the substrate); returns the new
-    number of sediment spheres and top of the sediment."""
+    number of sediment spheres."""
     pos = particle.centre
     rad = particle.radius
     for i in range(n):
         record.particle[n_sed - n_sub] = p
         _join_sediment(n_sed, pos[i, 0], pos[i, 1], pos[i, 2], rad[i], sediment, grid)
-        top_z = max(top_z, pos[i, 2] + rad[i])
         n_sed += 1
     for k in range(3):
         record.com[p, k] = particle.com[k]
     matrix_to_quat(particle.rotation, record.rotation[p])
     record.contacts[p] = n_c
     record.state[p] = state
-    return n_sed, top_z
+    return n_sed
 
 
 @jit(inline="always")

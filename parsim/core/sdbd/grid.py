@@ -44,6 +44,7 @@ __all__ = [
     "grid_insert",
     "grid_collect",
     "grid_collect_growing",
+    "top_near",
     "column_range",
     "column_lookup",
     "wrap_position",
@@ -249,6 +250,53 @@ def grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, x, y, z
     if iz > col_top[col]:
         col_top[col] = iz
     return head, col_top, hkeys, hval
+
+
+@jit(inline="always")  # as a call, its eight array arguments cost numba reference counting
+def top_near(geom, igeom, head, col_top, nxt, hkeys, hval, centre, x, y, reach):
+    """A height above every sediment sphere (centres ``centre``) whose centre lies within lateral
+    distance ``reach`` of ``(x, y)``, 0 (the floor) when none does: ``(L + 1.5) cell``, ``L`` the
+    highest layer holding such a centre, since half the cell bounds every sediment radius.  It
+    depends on those spheres alone, neither on the rest of the sediment nor on how the box is
+    cut into columns.  The layers are scanned from the highest top of the columns within reach
+    down, each over all those columns, to the first that holds a centre within reach."""
+    ix0, ix1, iy0, iy1 = column_range(geom, igeom, x - reach, x + reach, y - reach, y + reach)
+    periodic = igeom[0] == LATERAL_PERIODIC
+    length_x, length_y = geom[2], geom[3]
+    highest = -1
+    for iy in range(iy0, iy1 + 1):
+        for ix in range(ix0, ix1 + 1):
+            col = _column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy)
+            if col >= 0:
+                highest = max(highest, col_top[col])
+    for iz in range(highest, -1, -1):
+        for iy in range(iy0, iy1 + 1):
+            for ix in range(ix0, ix1 + 1):
+                col = _column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy)
+                if col < 0 or col_top[col] < iz:
+                    continue
+                j = head[iz, col]
+                while j >= 0:
+                    dx, dy = periodic_image(periodic, length_x, length_y, centre[j, 0] - x, centre[j, 1] - y)
+                    if dx * dx + dy * dy < reach * reach:
+                        return (iz + 1.5) * geom[6]
+                    j = nxt[j]
+    return 0.0
+
+
+@jit(inline="always")
+def _column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy):
+    """The column ``(ix, iy)`` if it exists and part of it lies within lateral distance ``reach``
+    of ``(x, y)``, else -1."""
+    gap_x, gap_y = periodic_image(igeom[0] == LATERAL_PERIODIC, geom[2], geom[3], x - geom[0] - (ix + 0.5) * geom[4],
+                                  y - geom[1] - (iy + 0.5) * geom[5])
+    gap_x = max(abs(gap_x) - 0.5 * geom[4], 0.0)
+    gap_y = max(abs(gap_y) - 0.5 * geom[5], 0.0)
+    if gap_x * gap_x + gap_y * gap_y >= reach * reach:
+        return -1
+    if igeom[0] == LATERAL_PERIODIC:
+        return _wrapped(ix, igeom[1]) + igeom[1] * _wrapped(iy, igeom[2])
+    return column_lookup(igeom, hkeys, hval, ix, iy)
 
 
 @jit(inline="always")  # part of grid_collect, the most frequent query of the engine

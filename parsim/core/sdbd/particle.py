@@ -4,8 +4,11 @@ The particle is rigid: its state is the centre of mass and the orientation, and 
 centres follow as ``centre_i = com + R body_i``.
 """
 
+import math
+
 from parsim.core.jit import jit
 from parsim.core.sdbd.constants import DROP_MARGIN
+from parsim.core.sdbd.grid import top_near
 from parsim.core.sdbd.rotation import (
     quat_from_axis_cos_sin,
     quat_mul,
@@ -31,11 +34,13 @@ def place_spheres(n, particle):
 
 @jit(inline="always")
 def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                  particle_rotation, particle_drop_xy, top_z, ell, particle):
+                  particle_rotation, particle_drop_xy, sediment, grid, ell, particle):
     """Particle ``p`` at its drop: scaled body offsets and radii, orientation (from
     ``particle_rotation[p]``, any non-zero quaternion), centre of mass above its drop point
-    with its lowest sphere ``DROP_MARGIN`` above the top of the sediment ``top_z``; returns
-    its number of spheres."""
+    with its lowest sphere ``DROP_MARGIN`` above the sediment within its reach
+    (:func:`.grid.top_near`: the particle's extent plus the largest sediment radius); returns
+    its number of spheres.  The sediment beyond that reach, which the vertical fall cannot
+    touch, does not change the drop, nor therefore the particle's descent."""
     body = particle.body
     rad = particle.radius
     q = particle.quaternion
@@ -57,12 +62,17 @@ def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, pa
     quat_normalize(q)
     quat_to_matrix(q, rot)
     below = 0.0
+    extent = 0.0
     for i in range(n):
         zi = rot[2, 0] * body[i, 0] + rot[2, 1] * body[i, 1] + rot[2, 2] * body[i, 2]
         below = max(below, rad[i] - zi)
+        extent = max(extent, math.sqrt(body[i, 0] ** 2 + body[i, 1] ** 2 + body[i, 2] ** 2) + rad[i])
     com[0] = particle_drop_xy[p, 0]
     com[1] = particle_drop_xy[p, 1]
-    com[2] = top_z + below + DROP_MARGIN * ell
+    geom = grid.geom
+    top = top_near(geom, grid.igeom, grid.head, grid.col_top, grid.nxt, grid.hkeys, grid.hval, sediment.centre,
+                   com[0], com[1], extent + 0.5 * geom[6])
+    com[2] = top + below + DROP_MARGIN * ell
     place_spheres(n, particle)
     return n
 
