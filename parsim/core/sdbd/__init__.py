@@ -253,7 +253,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
                              cycle_eps=1e-3, max_events_per_particle=100_000, clock_from_particle=-1,
                              wall_contact=WALL_FRICTIONLESS, check_overlaps=False,
                              trace_particle=-1, trace_steps=0, container=CONTAINER_BOX, cylinder=None,
-                             substrate_positions=None, substrate_radii=None, count=False):
+                             substrate_positions=None, substrate_radii=None, count=False, record_reads=False):
     """:func:`deposit` plus a dict of diagnostics, for tests and benchmarks.
 
     With ``check_overlaps`` the kernel measures, after every move, the largest overlap of
@@ -264,8 +264,10 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     ``trace_particle`` / ``trace_steps`` record the first steps of one particle in
     ``diagnostics["trace"]`` (see :func:`engine.run_deposition`).  With ``count``,
     ``diagnostics["counters"]`` holds the engine's counts and cycles by phase (:mod:`.counters`).
+    With ``record_reads``, ``diagnostics["reads"]`` (P, 4) holds per particle the lateral rectangle
+    ``x_low, x_high, y_low, y_high`` of the sediment its descent read (:mod:`.reads`).
     """
-    from parsim.core.sdbd import counters, engine, grid
+    from parsim.core.sdbd import counters, engine, grid, reads
     from parsim.core.sdbd.rotation import quat_to_matrix
 
     offsets = np.ascontiguousarray(shape_offsets, dtype=np.float64)
@@ -374,12 +376,13 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     diag = np.full(4, np.nan)
     trace = np.full((max(int(trace_steps), 1), 16), np.nan)
     counts = np.zeros(counters.N_COUNTERS if count else 0, dtype=np.int64)
+    reads_out = np.zeros((P if record_reads else 0, reads.N_READS))
     stopped_at, n_written = engine.run_deposition(
         offsets, radii, start, pshape, pscale, prot, pxy, sub_pos, sub_rad, *g, int(floor), int(wall_contact), float(trial_angle),
         int(cycle_n), float(cycle_eps), int(max_events_per_particle), ell,
         bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), sediment_centre,
         sediment_radius, out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag,
-        counts)
+        counts, reads_out)
     n_done = P if stopped_at < 0 else int(stopped_at)
     return DepositionResult(
         positions=sediment_centre[n_sub:n_sub + n_written],
@@ -395,7 +398,8 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
         clocked_seconds=float(diag[3]),
     ), {"max_overlap": float(diag[0]), "steps": int(diag[1]), "chunk_steps": int(diag[2]),
         "length_scale": ell, "trace": trace,
-        "counters": dict(zip(counters.NAMES, counts.tolist())) if count else {}}
+        "counters": dict(zip(counters.NAMES, counts.tolist())) if count else {},
+        "reads": reads_out[:n_done] if record_reads else None}
 
 
 

@@ -127,10 +127,11 @@ Scratch = bundle("Scratch", ["axis", "pivot", "e1", "e2", "normal", "normal_2", 
 #: Everything a particle's descent works on besides the particle and the sediment: its
 #: ``contacts``, their ``geometry``, the ``pivots`` of a rotation and the contacts
 #: ``released`` by the last decision, the ``trial`` geometry of the pivots after a trial
-#: rotation (4.1), the event ``window``, ``scratch``, and the run's ``counters``
-#: (:mod:`.counters`; empty when not counting); ``memory`` holds what they all borrow from.
+#: rotation (4.1), the event ``window``, ``scratch``, the run's ``counters``
+#: (:mod:`.counters`; empty when not counting) and the particle's ``reads`` (:mod:`.reads`;
+#: empty when not recording); ``memory`` holds what they all borrow from.
 Workspace = bundle("Workspace", ["contacts", "geometry", "pivots", "released", "trial", "window",
-                                     "scratch", "counters", "memory"])
+                                     "scratch", "counters", "reads", "memory"])
 
 #: The output of a run besides the sediment's spheres, preallocated for all particles: per
 #: sphere the ``particle`` index; per particle the centre of mass ``com``, the orientation
@@ -207,9 +208,9 @@ def _scratch(floats, f):
 
 
 @jit
-def new_workspace(counters):
+def new_workspace(counters, reads):
     """Every bundle of :class:`Workspace`, allocated once per run in one block of numbers and one of
-    integers (zero-filled), with the run's ``counters``."""
+    integers (zero-filled), with the run's ``counters`` and the particles' ``reads``."""
     floats = np.zeros(_WORKSPACE_FLOATS)
     ints = np.zeros(_WORKSPACE_INTS, dtype=np.int64)
     contacts, i, f = _contact_list(ints, floats, 0, 0, MAX_CONTACTS)
@@ -219,7 +220,7 @@ def new_workspace(counters):
     trial, i, f = _contact_geometry(ints, floats, i, f, 2)
     window, i, f = _event_window(ints, floats, i, f)
     scratch, f = _scratch(floats, f)
-    return Workspace(contacts, geometry, pivots, released, trial, window, scratch, borrowed(counters),
+    return Workspace(contacts, geometry, pivots, released, trial, window, scratch, borrowed(counters), borrowed(reads),
                      (floats, ints))
 
 

@@ -53,12 +53,13 @@ import numpy as np
 
 from parsim.core.growth import with_rows
 from parsim.core.jit import jit
-from parsim.core.sdbd import counters
+from parsim.core.sdbd import counters, reads
 from parsim.core.sdbd.bundles import grid_arrays
 from parsim.core.sdbd.borrowed import borrowed
 from parsim.core.sdbd.bundles import (Record, Settings, new_grid, new_particle, new_workspace, sediment_in,
                                       set_grid_arrays)
 from parsim.core.sdbd.constants import (
+    CYCLE_CLOSE_GAP,
     EVENT_LIMIT,
     FLOOR_STOP,
     HANGING_ONE,
@@ -101,7 +102,8 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
                    geom, igeom, head, col_top, nxt, hkeys, hval, counts,
                    floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell,
                    debug, trace_particle, trace, clock_from, sediment_centre, sediment_radius,
-                   out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag, tallies):
+                   out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag, tallies,
+                   reads_out):
     """Deposit all particles; returns ``(stopped_at, n_spheres_written)``.
 
     Inputs are validated by :func:`parsim.core.sdbd.deposit`.  The ``m`` spheres of the
@@ -124,7 +126,9 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     after the step, number of contacts after the step, and the obstacle index of up to 5
     contacts.  ``diag[D_CLOCKED_SECONDS]`` receives the wall-clock time spent on particles
     ``clock_from`` onwards (untouched when ``clock_from`` is not a particle index).
-    ``tallies`` receives the counters of :mod:`.counters` (an empty array: none are kept).
+    ``tallies`` receives the counters of :mod:`.counters` (an empty array: none are kept),
+    ``reads_out`` (P, 4) the rectangle each particle's descent read (:mod:`.reads`; no rows: none
+    is recorded).
     """
     n_part = particle_shape.shape[0]
     n_max = 1
@@ -146,7 +150,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     beyond_centre = np.empty((16, 3))
     n_beyond = np.int64(0)
     particle = new_particle(n_max)
-    work = new_workspace(tallies)
+    work = new_workspace(tallies, np.empty(reads.N_READS if reads_out.shape[0] else 0))
     run_started = counters.start(tallies)
     history = new_descent_history()
     buf = np.empty(4096, dtype=np.int64)
@@ -160,8 +164,9 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
         if p == clock_from:
             clock_start = _wall_clock()
         started = counters.start(tallies)
+        reads.forget(work.reads)
         n = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                          particle_rotation, particle_drop_xy, sediment, grid, ell, particle)
+                          particle_rotation, particle_drop_xy, sediment, grid, ell, particle, work.reads)
         _fit_grid(n, particle, sediment, n_sed, grid)
         counters.stop(tallies, counters.PARTICLE, started)
         state, n_c, steps, chunk_ends, overlap, buf = _descend(
@@ -169,6 +174,10 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
             p == trace_particle, trace, buf)
         n_steps += steps
         out_steps[p] = steps
+        reads.note_spheres(work.reads, n, particle, _search_margin(grid, ell))
+        if reads_out.shape[0] != 0:
+            for k in range(reads.N_READS):
+                reads_out[p, k] = work.reads[k]
         n_chunk_ends += chunk_ends
         worst_overlap = max(worst_overlap, overlap)
         if state == EVENT_LIMIT:
@@ -227,6 +236,7 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
             return EVENT_LIMIT, n_c, n_steps, n_chunk_ends, worst_overlap, buf
         n_steps += 1
         counters.add(tallies, counters.STEPS, 1)
+        reads.note_spheres(work.reads, n, particle, _search_margin(grid, ell))
         # ------------------------------------------------------------------- decide
         started = counters.start(tallies)
         fill_contacts(n_c, contacts, particle, sediment, geom, geometry, normal)
@@ -304,6 +314,13 @@ def _fit_grid(n, particle, sediment, n_sed, grid):
         head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j,
                                                  sed[j, 0], sed[j, 1], sed[j, 2])
     set_grid_arrays(grid, geom, igeom, head, col_top, nxt, hkeys, hval, counts)
+
+
+@jit(inline="always")
+def _search_margin(grid, ell):
+    """How far beyond a sphere's surface the fall and the closing of near obstacles search the
+    grid: the largest sediment radius (half the cell) and the gap of 4.2."""
+    return 0.5 * grid.geom[6] + CYCLE_CLOSE_GAP * ell
 
 
 @jit(inline="always")

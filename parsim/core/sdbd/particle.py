@@ -9,6 +9,7 @@ import math
 from parsim.core.jit import jit
 from parsim.core.sdbd.constants import DROP_MARGIN
 from parsim.core.sdbd.grid import top_near
+from parsim.core.sdbd.reads import note
 from parsim.core.sdbd.rotation import (
     quat_from_axis_cos_sin,
     quat_mul,
@@ -34,12 +35,12 @@ def place_spheres(n, particle):
 
 @jit(inline="always")
 def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                  particle_rotation, particle_drop_xy, sediment, grid, ell, particle):
+                  particle_rotation, particle_drop_xy, sediment, grid, ell, particle, reads):
     """Particle ``p`` at its drop: scaled body offsets and radii, orientation (from
     ``particle_rotation[p]``, any non-zero quaternion), centre of mass above its drop point
     with its lowest sphere ``DROP_MARGIN`` above the sediment within its reach
     (:func:`.grid.top_near`: the particle's extent plus the largest sediment radius); returns
-    its number of spheres.  The sediment beyond that reach, which the vertical fall cannot
+    its number of spheres; the square it read joins ``reads`` (:mod:`.reads`).  The sediment beyond that reach, which the vertical fall cannot
     touch, does not change the drop, nor therefore the particle's descent."""
     body = particle.body
     rad = particle.radius
@@ -70,8 +71,10 @@ def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, pa
     com[0] = particle_drop_xy[p, 0]
     com[1] = particle_drop_xy[p, 1]
     geom = grid.geom
+    reach = extent + 0.5 * geom[6]
     top = top_near(geom, grid.igeom, grid.head, grid.col_top, grid.nxt, grid.hkeys, grid.hval, sediment.centre,
-                   com[0], com[1], extent + 0.5 * geom[6])
+                   com[0], com[1], reach)
+    note(reads, com[0] - reach, com[0] + reach, com[1] - reach, com[1] + reach)
     com[2] = top + below + DROP_MARGIN * ell
     place_spheres(n, particle)
     return n
