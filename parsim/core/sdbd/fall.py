@@ -21,7 +21,7 @@ from parsim.core.sdbd.contacts import add_contact, copy_contact
 from parsim.core.sdbd.counters import FALL_CANDIDATES
 from parsim.core.sdbd.counters import add as counters_add
 from parsim.core.sdbd.events import fall_drop
-from parsim.core.sdbd.grid import column_lookup, column_range, min_image
+from parsim.core.sdbd.grid import column_range, column_within, min_image
 from parsim.core.sdbd.ties import push_event
 
 __all__ = ["fall", "fall_events"]
@@ -104,16 +104,8 @@ def fall_events(n, particle, sediment, grid, ell, window, counters):
         # drop bounded by the local surface
         for pas in range(2):
             for iy in range(iy0, iy1 + 1):
-                dcx, dcy = min_image(geom, igeom, 0.0, yi - geom[1] - (iy + 0.5) * geom[5])
-                ddy = max(abs(dcy) - 0.5 * geom[5], 0.0)
-                if ddy >= reach:
-                    continue
                 for ix in range(ix0, ix1 + 1):
-                    dcx, dcy = min_image(geom, igeom, xi - geom[0] - (ix + 0.5) * geom[4], 0.0)
-                    ddx = max(abs(dcx) - 0.5 * geom[4], 0.0)
-                    if ddx * ddx + ddy * ddy >= reach * reach:
-                        continue
-                    col = column_lookup(igeom, hkeys, hval, ix, iy)
+                    col = column_within(geom, igeom, hkeys, hval, xi, yi, reach, ix, iy)
                     if col < 0:
                         continue
                     top = col_top[col]

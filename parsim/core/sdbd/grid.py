@@ -47,6 +47,7 @@ __all__ = [
     "top_near",
     "column_range",
     "column_lookup",
+    "column_within",
     "wrap_position",
     "min_image",
     "periodic_image",
@@ -266,13 +267,13 @@ def top_near(geom, igeom, head, col_top, nxt, hkeys, hval, centre, x, y, reach):
     highest = -1
     for iy in range(iy0, iy1 + 1):
         for ix in range(ix0, ix1 + 1):
-            col = _column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy)
+            col = column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy)
             if col >= 0:
                 highest = max(highest, col_top[col])
     for iz in range(highest, -1, -1):
         for iy in range(iy0, iy1 + 1):
             for ix in range(ix0, ix1 + 1):
-                col = _column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy)
+                col = column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy)
                 if col < 0 or col_top[col] < iz:
                     continue
                 j = head[iz, col]
@@ -285,7 +286,7 @@ def top_near(geom, igeom, head, col_top, nxt, hkeys, hval, centre, x, y, reach):
 
 
 @jit(inline="always")
-def _column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy):
+def column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy):
     """The column ``(ix, iy)`` if it exists and part of it lies within lateral distance ``reach``
     of ``(x, y)``, else -1."""
     gap_x, gap_y = periodic_image(igeom[0] == LATERAL_PERIODIC, geom[2], geom[3], x - geom[0] - (ix + 0.5) * geom[4],
@@ -294,7 +295,7 @@ def _column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy):
     gap_y = max(abs(gap_y) - 0.5 * geom[5], 0.0)
     if gap_x * gap_x + gap_y * gap_y >= reach * reach:
         return -1
-    if igeom[0] == LATERAL_PERIODIC:
+    if igeom[0] == LATERAL_PERIODIC:  # column_lookup's arithmetic, here without a call
         return _wrapped(ix, igeom[1]) + igeom[1] * _wrapped(iy, igeom[2])
     return column_lookup(igeom, hkeys, hval, ix, iy)
 
