@@ -117,6 +117,8 @@ from parsim.core.sdbd.constants import (
 __all__ = [
     "deposit",
     "deposit_with_diagnostics",
+    "prepare_deposition",
+    "PreparedDeposition",
     "check_container",
     "DepositionResult",
     "EVENT_KINDS",
@@ -268,6 +270,105 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     ``x_low, x_high, y_low, y_high`` of the sediment its descent read (:mod:`.reads`).
     """
     from parsim.core.sdbd import counters, engine, grid, reads
+
+    prep = prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+                              particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
+                              trial_angle, cycle_n, cycle_eps, max_events_per_particle, wall_contact, container,
+                              cylinder, substrate_positions, substrate_radii)
+    P = len(prep.particle_shape)
+    n_total = prep.n_spheres
+    n_sub = len(prep.substrate_radii)
+    g = grid.grid_new(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.first_cell, n_total + n_sub,
+                      prep.polygon, prep.n_sides)
+    # the sediment's spheres, substrate first; after the run the particles' spheres are the result
+    sediment_centre = np.zeros((n_sub + n_total, 3))
+    sediment_radius = np.zeros(n_sub + n_total)
+    out_particle = np.zeros(n_total, dtype=np.int64)
+    out_com = np.zeros((P, 3))
+    out_rot = np.zeros((P, 4))
+    out_contacts = np.zeros(P, dtype=np.int8)
+    out_state = np.zeros(P, dtype=np.int8)
+    out_events = np.zeros((P, N_EVENT_KINDS), dtype=np.int32)
+    out_steps = np.zeros(P, dtype=np.int32)
+    diag = np.full(4, np.nan)
+    trace = np.full((max(int(trace_steps), 1), 16), np.nan)
+    counts = np.zeros(counters.N_COUNTERS if count else 0, dtype=np.int64)
+    reads_out = np.zeros((P if record_reads else 0, reads.N_READS))
+    stopped_at, n_written = engine.run_deposition(
+        *prep.kernel_inputs(), prep.substrate_positions, prep.substrate_radii, *g, *prep.kernel_settings(),
+        bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), sediment_centre,
+        sediment_radius, out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag,
+        counts, reads_out)
+    n_done = P if stopped_at < 0 else int(stopped_at)
+    return DepositionResult(
+        positions=sediment_centre[n_sub:n_sub + n_written],
+        radii=sediment_radius[n_sub:n_sub + n_written],
+        particle=out_particle[:n_written],
+        center_of_mass=out_com[:n_done],
+        rotation=out_rot[:n_done],
+        contacts=out_contacts[:n_done],
+        state=out_state[:n_done],
+        event_counts=out_events[:n_done],
+        steps=out_steps[:n_done],
+        stopped_at=int(stopped_at),
+        clocked_seconds=float(diag[3]),
+    ), {"max_overlap": float(diag[0]), "steps": int(diag[1]), "chunk_steps": int(diag[2]),
+        "length_scale": prep.length_scale, "trace": trace,
+        "counters": dict(zip(counters.NAMES, counts.tolist())) if count else {},
+        "reads": reads_out[:n_done] if record_reads else None}
+
+
+
+class PreparedDeposition(NamedTuple):
+    """The inputs of a deposition validated and in the kernel's types (:func:`prepare_deposition`),
+    with what follows from them: the length scale ``ell`` of the tolerances, the grid's first
+    cell, the largest sphere radius of each shape, the substrate and the container."""
+
+    shape_offsets: np.ndarray
+    shape_radii: np.ndarray
+    shape_start: np.ndarray
+    particle_shape: np.ndarray
+    particle_scale: np.ndarray
+    particle_rotation: np.ndarray
+    particle_drop_xy: np.ndarray
+    box_lower_xy: np.ndarray
+    box_upper_xy: np.ndarray
+    lateral: int
+    floor: int
+    wall_contact: int
+    trial_angle: float
+    cycle_n: int
+    cycle_eps: float
+    max_events: int
+    length_scale: float
+    first_cell: float
+    shape_largest_radius: np.ndarray
+    n_spheres: int
+    substrate_positions: np.ndarray
+    substrate_radii: np.ndarray
+    polygon: np.ndarray | None
+    n_sides: int
+
+    def kernel_inputs(self):
+        """The particles' arguments of the kernels, in their order."""
+        return (self.shape_offsets, self.shape_radii, self.shape_start, self.particle_shape, self.particle_scale,
+                self.particle_rotation, self.particle_drop_xy)
+
+    def kernel_settings(self):
+        """``floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell`` of the kernels."""
+        return (self.floor, self.wall_contact, self.trial_angle, self.cycle_n, self.cycle_eps, self.max_events,
+                self.length_scale)
+
+
+def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+                       particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
+                       trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
+                       wall_contact=WALL_FRICTIONLESS, container=CONTAINER_BOX, cylinder=None,
+                       substrate_positions=None, substrate_radii=None):
+    """The arguments of :func:`deposit` validated (a ValueError names the first bad one) as a
+    :class:`PreparedDeposition`."""
+    from parsim.core.sdbd.rotation import quat_to_matrix
+
     from parsim.core.sdbd.rotation import quat_to_matrix
 
     offsets = np.ascontiguousarray(shape_offsets, dtype=np.float64)
@@ -361,46 +462,10 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     # the cell bounds every sediment radius: the first particle's and the substrate's
     cell = 2.0 * pscale[0] * shape_rmax[pshape[0]] if P else 2.0 * r_max
     cell = max(cell, 2.0 * r_sub)
-    n_sub = len(sub_rad)
-    g = grid.grid_new(lateral, lo, hi, cell, n_total + n_sub, polygon, n_sides)
-    # the sediment's spheres, substrate first; after the run the particles' spheres are the result
-    sediment_centre = np.zeros((n_sub + n_total, 3))
-    sediment_radius = np.zeros(n_sub + n_total)
-    out_particle = np.zeros(n_total, dtype=np.int64)
-    out_com = np.zeros((P, 3))
-    out_rot = np.zeros((P, 4))
-    out_contacts = np.zeros(P, dtype=np.int8)
-    out_state = np.zeros(P, dtype=np.int8)
-    out_events = np.zeros((P, N_EVENT_KINDS), dtype=np.int32)
-    out_steps = np.zeros(P, dtype=np.int32)
-    diag = np.full(4, np.nan)
-    trace = np.full((max(int(trace_steps), 1), 16), np.nan)
-    counts = np.zeros(counters.N_COUNTERS if count else 0, dtype=np.int64)
-    reads_out = np.zeros((P if record_reads else 0, reads.N_READS))
-    stopped_at, n_written = engine.run_deposition(
-        offsets, radii, start, pshape, pscale, prot, pxy, sub_pos, sub_rad, *g, int(floor), int(wall_contact), float(trial_angle),
-        int(cycle_n), float(cycle_eps), int(max_events_per_particle), ell,
-        bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), sediment_centre,
-        sediment_radius, out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag,
-        counts, reads_out)
-    n_done = P if stopped_at < 0 else int(stopped_at)
-    return DepositionResult(
-        positions=sediment_centre[n_sub:n_sub + n_written],
-        radii=sediment_radius[n_sub:n_sub + n_written],
-        particle=out_particle[:n_written],
-        center_of_mass=out_com[:n_done],
-        rotation=out_rot[:n_done],
-        contacts=out_contacts[:n_done],
-        state=out_state[:n_done],
-        event_counts=out_events[:n_done],
-        steps=out_steps[:n_done],
-        stopped_at=int(stopped_at),
-        clocked_seconds=float(diag[3]),
-    ), {"max_overlap": float(diag[0]), "steps": int(diag[1]), "chunk_steps": int(diag[2]),
-        "length_scale": ell, "trace": trace,
-        "counters": dict(zip(counters.NAMES, counts.tolist())) if count else {},
-        "reads": reads_out[:n_done] if record_reads else None}
-
+    return PreparedDeposition(offsets, radii, start, pshape, pscale, prot, pxy, lo, hi, int(lateral), int(floor),
+                              int(wall_contact), float(trial_angle), int(cycle_n), float(cycle_eps),
+                              int(max_events_per_particle), ell, cell, shape_rmax, n_total, sub_pos, sub_rad,
+                              polygon, int(n_sides))
 
 
 def check_container(box_lower_xy, box_upper_xy, lateral, largest_radius, largest_extent, length_scale,

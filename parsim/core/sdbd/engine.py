@@ -300,19 +300,31 @@ def _fit_grid(n, particle, sediment, n_sed, grid):
     """Make the grid's cell at least the largest sphere diameter of the particle of ``n``
     spheres: when it is larger than any before, the grid is built anew with that cell and the
     ``n_sed`` sediment spheres are inserted again in their order."""
+    cell = largest_diameter(n, particle)
+    if cell > grid.geom[6]:
+        regrid(grid, cell, sediment.centre, np.arange(n_sed))
+
+
+@jit(inline="always")
+def largest_diameter(n, particle):
+    """The largest sphere diameter of the particle of ``n`` spheres."""
     cell = 0.0
     for i in range(n):
         cell = max(cell, 2.0 * particle.radius[i])
+    return cell
+
+
+@jit
+def regrid(grid, cell, centre, order):
+    """Build the grid anew with cell ``cell`` and insert the sediment spheres ``order`` (centres
+    ``centre``) in that order, each the newest of its cell."""
     geom = grid.geom
-    if cell <= geom[6]:
-        return
-    sed = sediment.centre
     geom, igeom, head, col_top, nxt, hkeys, hval, counts = empty_grid(
-        grid.igeom[0], geom[0], geom[1], geom[2], geom[3], cell, grid.nxt.shape[0], geom[GEOM_CONTAINER:],
-        grid.igeom[3])
-    for j in range(n_sed):
+        grid.igeom[0], geom[0], geom[1], geom[2], geom[3], cell, 1, geom[GEOM_CONTAINER:], grid.igeom[3])
+    nxt = grid.nxt
+    for j in order:
         head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j,
-                                                 sed[j, 0], sed[j, 1], sed[j, 2])
+                                                 centre[j, 0], centre[j, 1], centre[j, 2])
     set_grid_arrays(grid, geom, igeom, head, col_top, nxt, hkeys, hval, counts)
 
 

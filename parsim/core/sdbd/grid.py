@@ -4,7 +4,10 @@ Space is cut into columns of side ``ax x ay`` (``>=`` the cell, the largest sphe
 every column into layers of height ``az`` (the same bound) starting at the floor
 ``z = 0``.  A cell ``(column, layer)`` keeps a singly linked list of the sediment spheres
 whose (wrapped) centre lies in it: ``head[iz, col]`` is the newest sphere, ``nxt[j]`` the
-next one, ``-1`` ends a list.  Spheres are only ever added.  ``head`` is layer-major, so
+next one, ``-1`` ends a list.  A deposition only adds spheres, each the newest; a deposition
+spread over ranks also adds them out of order (:func:`grid_insert_ordered` keeps every list in
+the order of the serial deposition) and takes out a particle settled ahead of its turn
+(:func:`grid_remove`).  ``head`` is layer-major, so
 the cells of the surface of the pile, where all queries happen, share few memory pages.
 
 * ``col_top[col]`` is the highest non-empty layer of a column (the *height map*): a query
@@ -42,6 +45,8 @@ __all__ = [
     "grid_new",
     "empty_grid",
     "grid_insert",
+    "grid_insert_ordered",
+    "grid_remove",
     "grid_collect",
     "grid_collect_growing",
     "top_near",
@@ -228,13 +233,72 @@ def _new_column(igeom, head, col_top, hkeys, hval, counts, ix, iy):
 
 @jit
 def grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, x, y, z):
-    """Add sphere ``j`` with (wrapped) centre ``x, y, z``; returns the possibly grown arrays
-    ``(head, col_top, hkeys, hval)``."""
+    """Add sphere ``j`` with (wrapped) centre ``x, y, z`` at the head of its cell's list (the newest
+    sphere first); returns the possibly grown arrays ``(head, col_top, hkeys, hval)``."""
+    col, iz, head, col_top, hkeys, hval = _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, x, y, z)
+    nxt[j] = head[iz, col]
+    head[iz, col] = j
+    return head, col_top, hkeys, hval
+
+
+@jit
+def grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, x, y, z, key):
+    """:func:`grid_insert` for spheres that arrive out of order: sphere ``j`` goes into its cell's
+    list before the first sphere of smaller ``key``, so that every list runs in decreasing ``key``
+    whatever the order of insertion (a list filled in increasing ``key`` by :func:`grid_insert`
+    is the same list)."""
+    col, iz, head, col_top, hkeys, hval = _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, x, y, z)
+    before = -1
+    k = head[iz, col]
+    while k >= 0 and key[k] > key[j]:
+        before = k
+        k = nxt[k]
+    nxt[j] = k
+    if before < 0:
+        head[iz, col] = j
+    else:
+        nxt[before] = j
+    return head, col_top, hkeys, hval
+
+
+@jit
+def grid_remove(geom, igeom, head, col_top, nxt, hkeys, hval, j, x, y, z):
+    """Take sphere ``j`` (centre ``x, y, z`` as inserted) out of its cell's list; the column's top
+    layer comes down to the highest layer still holding a sphere, as if ``j`` had never been in."""
+    ix, iy = _clamped_column_index(geom, igeom, x, y)
+    col = column_lookup(igeom, hkeys, hval, ix, iy)
+    iz = max(int(math.floor(z / geom[6])), 0)
+    before = -1
+    k = head[iz, col]
+    while k != j:
+        before = k
+        k = nxt[k]
+    if before < 0:
+        head[iz, col] = nxt[j]
+    else:
+        nxt[before] = nxt[j]
+    nxt[j] = -1
+    top = col_top[col]
+    while top >= 0 and head[top, col] < 0:
+        top -= 1
+    col_top[col] = top
+
+
+@jit(inline="always")
+def _clamped_column_index(geom, igeom, x, y):
+    """Integer column of a centre; in a box, round-off at its faces is kept in the outer columns."""
     ix, iy = _column_index(geom, x, y)
     if igeom[0] != LATERAL_NONE:
-        # the centre is inside the box: keep round-off at its faces in the outer columns
         ix = min(max(ix, 0), igeom[1] - 1)
         iy = min(max(iy, 0), igeom[2] - 1)
+    return ix, iy
+
+
+@jit(inline="always")
+def _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, x, y, z):
+    """The cell ``(col, iz)`` of a centre, its column created and its layer allocated if new, the
+    column's top raised to it; returns ``(col, iz, head, col_top, hkeys, hval)``, possibly grown."""
+    ix, iy = _clamped_column_index(geom, igeom, x, y)
     col = column_lookup(igeom, hkeys, hval, ix, iy)
     if col < 0:
         col, head, col_top, hkeys, hval = _new_column(igeom, head, col_top, hkeys, hval, counts, ix, iy)
@@ -246,11 +310,9 @@ def grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, x, y, z
         nh = np.full((nl, head.shape[1]), -1, dtype=np.int64)
         nh[: head.shape[0], :] = head
         head = nh
-    nxt[j] = head[iz, col]
-    head[iz, col] = j
     if iz > col_top[col]:
         col_top[col] = iz
-    return head, col_top, hkeys, hval
+    return col, iz, head, col_top, hkeys, hval
 
 
 @jit(inline="always")  # as a call, its eight array arguments cost numba reference counting

@@ -1,0 +1,390 @@
+"""One rank's part of a deposition spread over ranks: its particles settled ahead of their turn.
+
+A rank owns the particles dropped in its block of columns (its *rows*, in drop order) and holds
+a *local sediment*: the substrate and the committed particles whose spheres lie in its *region*
+(the block widened by a halo), its own particles, and spheres fetched for a particle that
+rolled out of the region.  Every sphere carries its *key*, its index in the serial sediment
+(substrate first, then the particles' spheres in drop order), and the grid keeps each cell's
+list in decreasing key (:func:`.grid.grid_insert_ordered`), as the serial run does, whatever
+the order in which spheres arrive.
+
+A row is *absent*, *present* (settled speculatively, its spheres in the sediment), *stopped*
+(settled speculatively into the event limit, no spheres) or *final*.  Each settled row keeps
+its footprint (the lateral bounding box of its sphere centres) and its read rectangle
+(:mod:`.reads`).  The kernels keep this invariant:
+
+    every present row was settled on what the local sediment now holds in its read rectangle
+    widened by a column, leaving out the particles dropped after it.
+
+A descent reads only sediment spheres whose cells meet its rectangle, so such a row equals the
+serial particle as soon as the serial sediment before it agrees with the local one there: the
+check of :func:`first_failure`.  The invariant holds because every change of the local sediment
+takes out (*withdraws*) the present rows it touches, later rows only, in drop order:
+
+* a row settled again withdraws the later present rows its new rectangle meets before its
+  spheres join (they were not there in the serial run), settles again if there were any, and
+  after joining withdraws the later rows whose rectangle meets its spheres;
+* a withdrawn row withdraws the later rows whose rectangle meets its old spheres;
+* committed spheres of other ranks (halo, fetched) withdraw the rows whose rectangle they meet.
+"""
+
+import math
+
+import numpy as np
+
+from parsim.core.jit import jit
+from parsim.core.sdbd import reads as read_box
+from parsim.core.sdbd.bundles import (Settings, grid_arrays, new_grid, new_particle, new_workspace, sediment_in,
+                                      set_grid_arrays)
+from parsim.core.sdbd.constants import EVENT_LIMIT, LATERAL_PERIODIC, LATERAL_WALLS, WALL_FRICTIONLESS, VIRTUAL_ANGLE
+from parsim.core.sdbd.cycling import new_descent_history
+from parsim.core.sdbd.engine import _descend, _search_margin, largest_diameter, regrid
+from parsim.core.sdbd.grid import grid_insert_ordered, grid_remove, wrap_position
+from parsim.core.sdbd.particle import drop_particle, place_spheres
+from parsim.core.sdbd.rotation import matrix_to_quat
+
+__all__ = ["ABSENT", "PRESENT", "STOPPED", "FINAL", "settle_rows", "first_failure", "insert_committed",
+           "withdraw", "grid_with_cell", "lay_substrate", "rows_meeting", "rows_with_centre_in", "box_meets",
+           "interval_within"]
+
+ABSENT, PRESENT, STOPPED, FINAL = 0, 1, 2, 3
+#: why a row cannot be committed (:func:`first_failure`), in the order they are examined
+FAIL_REGION, FAIL_CONFLICT, FAIL_STOPPED = 0, 1, 2
+N_FAILURES = 3
+
+
+@jit(inline="always")
+def interval_meets(a0, a1, b0, b1, length, periodic):
+    """Whether ``[a0, a1]`` and ``[b0, b1]`` overlap (on the circle of circumference ``length`` if
+    ``periodic``); an empty interval (``a0 > a1``) meets nothing."""
+    if a0 > a1 or b0 > b1:
+        return False
+    if not periodic:
+        return a0 <= b1 and b0 <= a1
+    if a1 - a0 >= length or b1 - b0 >= length:
+        return True
+    shift = length * math.floor((a0 - b0) / length)  # b moved by whole periods to start at or below a0
+    b0 += shift
+    b1 += shift
+    return a0 <= b1 or b0 + length <= a1
+
+
+@jit(inline="always")
+def interval_within(a0, a1, b0, b1, length, periodic):
+    """Whether ``[a0, a1]`` lies inside ``[b0, b1]`` (on the circle of circumference ``length`` if
+    ``periodic``, where ``b1 - b0 >= length`` is the whole circle)."""
+    if periodic:
+        if b1 - b0 >= length:
+            return True
+        shift = length * math.floor((a0 - b0) / length)  # a moved by whole periods to start in [b0, b0 + L)
+        a0 -= shift
+        a1 -= shift
+    return b0 <= a0 and a1 <= b1
+
+
+@jit(inline="always")
+def box_meets(box, other, margin, length_x, length_y, periodic):
+    """Whether the rectangle ``box`` (x_low, x_high, y_low, y_high) widened by ``margin`` meets
+    ``other`` (periodic boxes wrap)."""
+    return (interval_meets(box[0] - margin, box[1] + margin, other[0], other[1], length_x, periodic)
+            and interval_meets(box[2] - margin, box[3] + margin, other[2], other[3], length_y, periodic))
+
+
+@jit
+def withdraw(row, last, status, footprint, rectangle, slot, count, centre, radius, grid_state, margin):
+    """Take row ``row`` (present or stopped) out of the local sediment, and with it every later
+    present row up to ``last`` (exclusive) whose rectangle widened by ``margin`` meets the spheres
+    of a row withdrawn; their status becomes ABSENT.  ``count[o]`` is row ``o``'s number of
+    spheres, from slot ``slot[o]`` on."""
+    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_state
+    periodic = igeom[0] == LATERAL_PERIODIC
+    gone = np.empty(last - row, dtype=np.int64)
+    n_gone = 0
+    for o in range(row, last):
+        if status[o] != PRESENT and status[o] != STOPPED:
+            continue
+        hit = o == row
+        for g in range(n_gone):
+            if hit:
+                break
+            hit = box_meets(rectangle[o], footprint[gone[g]], margin, geom[2], geom[3], periodic)
+        if not hit:
+            continue
+        if status[o] == PRESENT:
+            for j in range(slot[o], slot[o] + count[o]):
+                grid_remove(geom, igeom, head, col_top, nxt, hkeys, hval, j, centre[j, 0], centre[j, 1],
+                            centre[j, 2])
+                radius[j] = 0.0  # out of the grid: not rebuilt into it
+            gone[n_gone] = o
+            n_gone += 1
+        status[o] = ABSENT
+
+
+@jit
+def _withdraw_met(first, last, box, by_footprint, status, footprint, rectangle, slot, count, centre, radius,
+                  grid_state, margin):
+    """Withdraw (with :func:`withdraw`) the present rows in ``first .. last - 1`` that ``box`` meets:
+    with ``by_footprint``, those with a sphere in ``box`` (a rectangle read) widened by ``margin``
+    (stopped rows have none); else those whose rectangle widened by ``margin`` meets ``box`` (the
+    footprint of spheres that joined).  Returns whether any was."""
+    geom = grid_state[0]
+    periodic = grid_state[1][0] == LATERAL_PERIODIC
+    any_met = False
+    for o in range(first, last):
+        if by_footprint:
+            met = status[o] == PRESENT and box_meets(box, footprint[o], margin, geom[2], geom[3], periodic)
+        else:
+            met = ((status[o] == PRESENT or status[o] == STOPPED)
+                   and box_meets(rectangle[o], box, margin, geom[2], geom[3], periodic))
+        if met:
+            withdraw(o, last, status, footprint, rectangle, slot, count, centre, radius, grid_state, margin)
+            any_met = True
+    return any_met
+
+
+@jit
+def regrid_by_key(grid, cell, centre, radius, key):
+    """Build the grid anew with cell ``cell`` over the slots in the sediment (radius > 0), inserted
+    in increasing key: every list as the serial run's."""
+    used = np.flatnonzero(radius > 0.0)
+    regrid(grid, cell, centre, used[np.argsort(key[used], kind="mergesort")])
+
+
+@jit
+def grid_with_cell(grid_state, cell, centre, radius, key):
+    """The grid's arrays, rebuilt with cell ``cell`` (:func:`regrid_by_key`)."""
+    grid = new_grid(*grid_state)
+    regrid_by_key(grid, cell, centre, radius, key)
+    return grid.memory  # the arrays themselves: borrowed views never go back to Python
+
+
+@jit
+def insert_committed(n_particles, particle_count, particle_footprint, sphere_key, sphere_centre, sphere_radius,
+                     first_slot, centre, radius, key, grid_state, first_row, last_row, status, footprint,
+                     rectangle, slot, count, margin):
+    """Committed particles of other ranks join the local sediment in slots from ``first_slot`` on:
+    particle ``k`` has ``particle_count[k]`` spheres (keys, wrapped centres, radii in the next rows
+    of ``sphere_*``) and footprint ``particle_footprint[k]``.  Each first withdraws the present
+    rows in ``first_row .. last_row - 1`` whose rectangle it meets.  Returns the grid's arrays."""
+    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
+    s = 0
+    j = first_slot
+    for k in range(n_particles):
+        _withdraw_met(first_row, last_row, particle_footprint[k], False, status, footprint, rectangle, slot, count,
+                      centre, radius, (geom, igeom, head, col_top, nxt, hkeys, hval, counts), margin)
+        for _ in range(particle_count[k]):
+            for d in range(3):
+                centre[j, d] = sphere_centre[s, d]
+            radius[j] = sphere_radius[s]
+            key[j] = sphere_key[s]
+            head, col_top, hkeys, hval = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts,
+                                                             j, centre[j, 0], centre[j, 1], centre[j, 2], key)
+            s += 1
+            j += 1
+    return geom, igeom, head, col_top, nxt, hkeys, hval, counts
+
+
+@jit
+def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, shape_start, particle_shape,
+                particle_scale, particle_rotation, particle_drop_xy, grid_state, centre, radius, key, floor_mode,
+                wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell, status, footprint, rectangle, slot,
+                count, first_key, out_com, out_rot, out_contacts, out_state, out_events, out_steps, out_chunks,
+                out_sphere, sphere_row, margin, n_max, settles):
+    """Settle the absent rows among ``first .. last - 1`` in drop order (row ``o`` is particle
+    ``index[o]``), keeping the invariant of the module docs; rows from ``settled_end`` on were
+    never settled.  Each writes its results into the ``out_*`` rows (``out_sphere`` from row
+    ``sphere_row[o]`` on: its spheres as the particle holds them, a periodic box's beyond it
+    included), its footprint and its rectangle; ``settles[0]`` counts the descents.  Returns the
+    grid's arrays."""
+    virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
+    settings = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
+                        grid_state[1][0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, False)
+    grid = new_grid(*grid_state)
+    sediment = sediment_in(centre, radius)
+    particle = new_particle(n_max)
+    work = new_workspace(np.empty(0, dtype=np.int64), np.empty(read_box.N_READS))
+    history = new_descent_history()
+    trace = np.empty((1, 16))
+    buf = np.empty(4096, dtype=np.int64)
+    periodic = grid_state[1][0] == LATERAL_PERIODIC
+    for o in range(first, last):
+        if status[o] != ABSENT:
+            continue
+        later = max(settled_end, o + 1)
+        while True:
+            settles[0] += 1
+            n, state, n_c, steps, chunks, buf = _settle(index[o], shape_offsets, shape_radii, shape_start,
+                                                        particle_shape, particle_scale, particle_rotation,
+                                                        particle_drop_xy, sediment, grid, ell, particle, work,
+                                                        history, settings, out_events[o], trace, buf, periodic,
+                                                        key)
+            # later rows were not there in the serial run: settle again without those it read
+            if not _withdraw_met(o + 1, later, work.reads, True, status, footprint, rectangle, slot, count,
+                                 centre, radius, grid_arrays(grid), margin):
+                break
+        for k in range(read_box.N_READS):
+            rectangle[o, k] = work.reads[k]
+        out_steps[o] = steps
+        out_chunks[o] = chunks
+        out_state[o] = state
+        if state == EVENT_LIMIT:
+            status[o] = STOPPED
+            footprint[o, 0] = math.inf
+            footprint[o, 1] = -math.inf
+            footprint[o, 2] = math.inf
+            footprint[o, 3] = -math.inf
+            continue
+        _freeze_row(o, n, particle, n_c, sediment, grid, key, slot[o], first_key[o], out_com, out_rot, out_contacts,
+                    out_sphere, sphere_row[o], footprint)
+        status[o] = PRESENT
+        # later rows settled while this one was elsewhere or absent
+        _withdraw_met(o + 1, later, footprint[o], False, status, footprint, rectangle, slot, count, centre, radius,
+                      grid_arrays(grid), margin)
+        settled_end = later
+    return grid.memory  # the arrays themselves: borrowed views never go back to Python
+
+
+@jit
+def _settle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation,
+            particle_drop_xy, sediment, grid, ell, particle, work, history, settings, events, trace, buf, periodic,
+            key):
+    """Drop particle ``p`` and let it descend as the serial loop does (:func:`.engine.run_deposition`;
+    a particle with a sphere larger than any before grows the grid's cell after its drop); its
+    rectangle is in ``work.reads``.  Returns ``(n, state, n_c, steps, chunk_ends, buf)``."""
+    for k in range(events.shape[0]):
+        events[k] = 0
+    read_box.forget(work.reads)
+    n = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+                      particle_rotation, particle_drop_xy, sediment, grid, ell, particle, work.reads)
+    cell = largest_diameter(n, particle)
+    if cell > grid.geom[6]:
+        regrid_by_key(grid, cell, sediment.centre, sediment.radius, key)
+    state, n_c, steps, chunk_ends, _, buf = _descend(n, particle, work, history, sediment, grid, settings, events,
+                                                     False, trace, buf)
+    read_box.note_spheres(work.reads, n, particle, _search_margin(grid, ell))
+    if state != EVENT_LIMIT and periodic:
+        cx, cy = wrap_position(grid.geom, grid.igeom, particle.com[0], particle.com[1])
+        particle.com[0] = cx
+        particle.com[1] = cy
+        place_spheres(n, particle)
+    return n, state, n_c, steps, chunk_ends, buf
+
+
+@jit
+def _freeze_row(o, n, particle, n_c, sediment, grid, key, first_slot, first_key, out_com, out_rot, out_contacts,
+                out_sphere, sphere_row, footprint):
+    """Row ``o``'s particle of ``n`` spheres at rest joins the local sediment (slots from
+    ``first_slot``, keys from ``first_key``) and its results are written."""
+    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_arrays(grid)
+    x_low = y_low = math.inf
+    x_high = y_high = -math.inf
+    for i in range(n):
+        j = first_slot + i
+        x = particle.centre[i, 0]
+        y = particle.centre[i, 1]
+        wx, wy = wrap_position(geom, igeom, x, y)
+        sediment.centre[j, 0] = wx
+        sediment.centre[j, 1] = wy
+        sediment.centre[j, 2] = particle.centre[i, 2]
+        sediment.radius[j] = particle.radius[i]
+        key[j] = first_key + i
+        grown = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy,
+                                    particle.centre[i, 2], key)
+        head, col_top, hkeys, hval = grown
+        for d in range(3):
+            out_sphere[sphere_row + i, d] = particle.centre[i, d]
+        x_low = min(x_low, x)
+        x_high = max(x_high, x)
+        y_low = min(y_low, y)
+        y_high = max(y_high, y)
+    footprint[o, 0] = x_low
+    footprint[o, 1] = x_high
+    footprint[o, 2] = y_low
+    footprint[o, 3] = y_high
+    _keep_grid(grid, head, col_top, hkeys, hval)
+    for d in range(3):
+        out_com[o, d] = particle.com[d]
+    matrix_to_quat(particle.rotation, out_rot[o])
+    out_contacts[o] = n_c
+
+
+@jit(inline="always")
+def _keep_grid(grid, head, col_top, hkeys, hval):
+    """Make possibly grown grid arrays the grid's."""
+    geom, igeom, _, _, nxt, _, _, counts = grid_arrays(grid)
+    set_grid_arrays(grid, geom, igeom, head, col_top, nxt, hkeys, hval, counts)
+
+
+@jit
+def first_failure(first, last, index, status, rectangle, region, other_index, other_footprint, n_other, margin,
+                  length_x, length_y, periodic):
+    """The first of rows ``first .. last - 1`` (settled) that cannot be committed once every particle
+    before it is, as ``index * N_FAILURES + reason``, or -1: FAIL_REGION if its rectangle widened by
+    ``margin`` leaves the ``region`` (x_low, x_high) whose committed sediment this rank holds,
+    FAIL_CONFLICT if a particle of another rank dropped after the rows committed so far and before it
+    (``other_index``, ``other_footprint``, sorted by index) has a sphere there, FAIL_STOPPED if it
+    stopped at the event limit.  Others' particles dropped before it meet its rectangle only if their
+    footprint meets the region: they are all listed."""
+    start = 0
+    for o in range(first, last):
+        p = index[o]
+        box = rectangle[o]
+        if not interval_within(box[0] - margin, box[1] + margin, region[0], region[1], length_x, periodic):
+            return p * N_FAILURES + FAIL_REGION
+        while start < n_other and other_index[start] < p:
+            start += 1
+        for k in range(start):
+            if box_meets(box, other_footprint[k], margin, length_x, length_y, periodic):
+                return p * N_FAILURES + FAIL_CONFLICT
+        if status[o] == STOPPED:
+            return p * N_FAILURES + FAIL_STOPPED
+    return -1
+
+
+@jit
+def lay_substrate(positions, radii, region, centre, radius, key, grid_state):
+    """The substrate's spheres (keys ``0 .. m - 1``) whose wrapped centre lies in the ``region``
+    (x_low, x_high) join the empty local sediment, as the serial run lays them.  Returns their
+    number and the grid's arrays."""
+    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
+    periodic = igeom[0] == LATERAL_PERIODIC
+    n = 0
+    for j in range(radii.shape[0]):
+        wx, wy = wrap_position(geom, igeom, positions[j, 0], positions[j, 1])
+        if not interval_within(wx, wx, region[0], region[1], geom[2], periodic):
+            continue
+        centre[n, 0] = wx
+        centre[n, 1] = wy
+        centre[n, 2] = positions[j, 2]
+        radius[n] = radii[j]
+        key[n] = j
+        head, col_top, hkeys, hval = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts, n,
+                                                         wx, wy, positions[j, 2], key)
+        n += 1
+    return n, (geom, igeom, head, col_top, nxt, hkeys, hval, counts)
+
+
+@jit
+def rows_meeting(boxes, x_low, x_high, length, periodic):
+    """Which rows' boxes (x_low, x_high, ...) meet ``[x_low, x_high]`` in x."""
+    met = np.zeros(boxes.shape[0], dtype=np.bool_)
+    for o in range(boxes.shape[0]):
+        met[o] = interval_meets(boxes[o, 0], boxes[o, 1], x_low, x_high, length, periodic)
+    return met
+
+
+@jit
+def rows_with_centre_in(rows, slot, count, centre, box, length_x, length_y, periodic):
+    """Which of ``rows`` have a sphere (slots ``slot[o] ..`` of ``count[o]``) whose centre lies in
+    ``box`` (x_low, x_high, y_low, y_high; y ignored when ``y_low > y_high``)."""
+    inside = np.zeros(rows.shape[0], dtype=np.bool_)
+    for r in range(rows.shape[0]):
+        o = rows[r]
+        for j in range(slot[o], slot[o] + count[o]):
+            x = centre[j, 0]
+            y = centre[j, 1]
+            if interval_within(x, x, box[0], box[1], length_x, periodic) and (
+                    box[2] > box[3] or interval_within(y, y, box[2], box[3], length_y, periodic)):
+                inside[r] = True
+                break
+    return inside

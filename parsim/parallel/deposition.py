@@ -1,0 +1,495 @@
+"""One sediment spread over MPI ranks, bitwise the serial sediment.
+
+The box is cut across x into one block of columns per rank (:class:`BlockLayout`).  A rank owns
+the particles dropped in its block and settles them ahead of their turn on its local sediment
+(:mod:`parsim.core.sdbd.blocks`): the substrate and committed particles in its *region* (the block
+widened by the halo), and its own particles.  The serial drop order defines the answer; the ranks
+go through it in rounds, each over a window of drop indices starting at the *frontier* (every
+particle before it is committed, on every rank):
+
+1. each rank settles its absent particles of the window in drop order;
+2. each sends the footprints of its window's particles to the ranks whose region they meet;
+3. each finds its first particle that cannot be committed once all before it are
+   (:func:`parsim.core.sdbd.blocks.first_failure`): its rectangle leaves the region, or a particle
+   of another rank dropped between the frontier and it has a sphere in its rectangle, or it stopped
+   at the event limit; the smallest over the ranks (one reduction) is the new frontier;
+4. a particle in conflict is withdrawn and settled again in the next round, when it is at the
+   frontier and so exact; one whose rectangle left the region is settled again at once on the
+   committed spheres its owner fetches from every rank, until its rectangle stays in what its
+   owner holds;
+5. each rank sends its newly committed particles to the ranks whose region holds one of their
+   sphere centres, and inserts those it receives; they withdraw the present particles they touch.
+
+Why it is the serial sediment: a descent reads only sediment spheres in grid cells that meet its
+rectangle, and the grid's lists hold them in the serial order (keys).  A particle committed at
+the frontier was settled on a local sediment that, within its rectangle widened by a column, held
+every sphere of the particles before it: those of its own rank (kept so by the withdrawals), the
+committed ones of the others (the halo holds all in the region, the rectangle lies in the region,
+and those committed after it was settled withdrew it if they touched its rectangle), and none of
+the particles being settled by other ranks (checked in 3).  So its descent read what the serial
+descent reads, step by step, and gives the same bits.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsim.core import sdbd
+from parsim.core.jit import jit
+from parsim.core.sdbd import blocks, grid as grid_module
+from parsim.core.sdbd.blocks import (ABSENT, FAIL_CONFLICT, FAIL_REGION, FAIL_STOPPED, FINAL, N_FAILURES, PRESENT,
+                                     STOPPED)
+from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, N_EVENT_KINDS
+
+__all__ = ["BlockLayout", "deposit_decomposed", "DecomposedDeposition", "default_halo"]
+
+#: particles per rank in a round's window of drop indices
+WINDOW_PER_RANK = 512
+
+
+def default_halo(prep) -> float:
+    """The halo (how far a region reaches beyond its block) for a deposition: eight columns and twice
+    the largest particle extent, wider than the travel of nearly every particle measured in boxes
+    (a heap's particles roll farther; their owners fetch what they miss)."""
+    extent = 0.0
+    for s in range(len(prep.shape_start) - 1):
+        a, b = prep.shape_start[s], prep.shape_start[s + 1]
+        extent = max(extent, float(np.max(np.linalg.norm(prep.shape_offsets[a:b], axis=1) + prep.shape_radii[a:b])))
+    scale = float(np.max(prep.particle_scale)) if len(prep.particle_scale) else 1.0
+    return 8.0 * _largest_cell(prep) + 2.0 * extent * scale
+
+
+def _largest_cell(prep) -> float:
+    """The grid's cell at the end of the run: the largest sphere diameter, substrate included."""
+    cells = _cells_after(prep)
+    return float(cells[-1]) if len(cells) else prep.first_cell
+
+
+def _cells_after(prep) -> np.ndarray:
+    """The grid's cell after each particle's arrival (the largest sphere diameter so far)."""
+    diameters = 2.0 * prep.particle_scale * prep.shape_largest_radius[prep.particle_shape]
+    return np.maximum.accumulate(np.maximum(diameters, prep.first_cell)) if len(diameters) else diameters
+
+
+class BlockLayout:
+    """Blocks of columns across x, one per rank that owns particles.
+
+    A periodic or walled box is cut into equal blocks; a heap's drop area is, and its outer blocks
+    reach to infinity.  ``region(k)`` is block ``k`` widened by ``halo`` on both sides (on a
+    periodic box's circle, the whole circle if that covers it)."""
+
+    def __init__(self, lateral, box_lower_xy, box_upper_xy, drop_x, n_blocks, halo):
+        self.periodic = lateral == LATERAL_PERIODIC
+        self.n_blocks = int(n_blocks)
+        self.halo = float(halo)
+        if lateral == LATERAL_NONE:
+            low, high = (float(np.min(drop_x)), float(np.max(drop_x))) if len(drop_x) else (0.0, 1.0)
+        else:
+            low, high = float(box_lower_xy[0]), float(box_upper_xy[0])
+        self.low, self.length = low, high - low
+        self.edges = low + self.length * np.arange(self.n_blocks + 1) / self.n_blocks
+        if not self.periodic:
+            self.edges[0], self.edges[-1] = -np.inf, np.inf
+
+    def owners(self, x) -> np.ndarray:
+        """The block of each drop abscissa."""
+        if self.periodic:
+            x = self.low + np.mod(np.asarray(x) - self.low, self.length)
+        inner = self.edges[1:-1]
+        return np.searchsorted(inner, x, side="right").astype(np.int64)
+
+    def region(self, k) -> np.ndarray:
+        """``[x_low, x_high]`` of block ``k`` widened by the halo."""
+        a, b = self.edges[k] - self.halo, self.edges[k + 1] + self.halo
+        if self.periodic and b - a >= self.length:
+            b = a + self.length
+        return np.array([a, b])
+
+
+@dataclass
+class DecomposedDeposition:
+    """One rank's share of a deposition spread over ranks: its committed particles (rows, in drop
+    order) and what the run counted.  :meth:`gather` assembles the serial result on one rank."""
+
+    index: np.ndarray
+    center_of_mass: np.ndarray
+    rotation: np.ndarray
+    contacts: np.ndarray
+    state: np.ndarray
+    event_counts: np.ndarray
+    steps: np.ndarray
+    sphere_count: np.ndarray
+    positions: np.ndarray
+    radii: np.ndarray
+    stopped_at: int
+    tally: dict
+
+    def gather(self, comm, root=0):
+        """The :class:`parsim.core.sdbd.DepositionResult` of the whole sediment on rank ``root``
+        (None on the others)."""
+        parts = comm.gather(self, root=root)
+        if comm.Get_rank() != root:
+            return None
+
+        def joined(name):
+            return np.concatenate([getattr(p, name) for p in parts])
+
+        index = joined("index")
+        order = np.argsort(index, kind="stable")
+        counts = joined("sphere_count")
+        ordered = counts[order]
+        take = _spans((np.cumsum(counts) - counts)[order], ordered)
+        return sdbd.DepositionResult(
+            positions=joined("positions")[take], radii=joined("radii")[take],
+            particle=np.repeat(index[order], ordered), center_of_mass=joined("center_of_mass")[order],
+            rotation=joined("rotation")[order], contacts=joined("contacts")[order], state=joined("state")[order],
+            event_counts=joined("event_counts")[order], steps=joined("steps")[order], stopped_at=self.stopped_at,
+            clocked_seconds=float("nan"))
+
+
+def deposit_decomposed(comm, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+                       particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
+                       trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
+                       wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX, cylinder=None,
+                       substrate_positions=None, substrate_radii=None, halo=None,
+                       window_per_rank=WINDOW_PER_RANK) -> DecomposedDeposition:
+    """:func:`parsim.core.sdbd.deposit` spread over the ranks of ``comm`` (collective; every rank
+    passes the same arguments): each rank returns its share, whose :meth:`~DecomposedDeposition.gather`
+    is bitwise the serial result.  ``halo`` is how far a rank's region reaches beyond its block
+    (default :func:`default_halo`); a box whose blocks would be narrower than the halo is settled
+    whole by rank 0.  ``window_per_rank`` sets the drop indices of a round (that many per rank)."""
+    prep = sdbd.prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+                                   particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
+                                   trial_angle, cycle_n, cycle_eps, max_events_per_particle, wall_contact, container,
+                                   cylinder, substrate_positions, substrate_radii)
+    halo = default_halo(prep) if halo is None else float(halo)
+    if not (np.isfinite(halo) and halo > 0):
+        raise ValueError(f"halo must be a finite length > 0, got {halo}")
+    layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.particle_drop_xy[:, 0],
+                         comm.Get_size(), halo)
+    if layout.length / layout.n_blocks < halo:  # blocks narrower than the halo: the task runs whole
+        layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.particle_drop_xy[:, 0], 1, halo)
+    return _RankRun(comm, prep, layout, max(1, int(window_per_rank)) * layout.n_blocks).run()
+
+
+class _RankRun:
+    """The rounds of :func:`deposit_decomposed` on one rank (see the module docs)."""
+
+    def __init__(self, comm, prep, layout, window):
+        self.comm = comm
+        self.rank = comm.Get_rank()
+        self.prep = prep
+        self.layout = layout
+        self.window = window
+        self.periodic = layout.periodic
+        self.length = (prep.box_upper_xy - prep.box_lower_xy).astype(float)
+        n_sub = len(prep.substrate_radii)
+        counts = np.diff(prep.shape_start)[prep.particle_shape]
+        owners = layout.owners(prep.particle_drop_xy[:, 0])
+        self.index = np.flatnonzero(owners == self.rank)
+        self.count = counts[self.index]
+        self.first_key = (n_sub + np.cumsum(counts) - counts)[self.index]
+        self.sphere_row = np.cumsum(self.count) - self.count
+        n = len(self.index)
+        self.slot = np.full(n, -1, dtype=np.int64)
+        self.status = np.zeros(n, dtype=np.int8)
+        self.footprint = np.zeros((n, 4))
+        self.rectangle = np.zeros((n, 4))
+        self.com = np.zeros((n, 3))
+        self.rot = np.zeros((n, 4))
+        self.contacts = np.zeros(n, dtype=np.int8)
+        self.state = np.zeros(n, dtype=np.int8)
+        self.events = np.zeros((n, N_EVENT_KINDS), dtype=np.int32)
+        self.steps = np.zeros(n, dtype=np.int32)
+        self.chunks = np.zeros(n, dtype=np.int64)
+        self.spheres = np.zeros((int(self.count.sum()), 3))
+        self.n_max = int(np.max(np.diff(prep.shape_start)))
+        self.cells = _cells_after(prep)
+        self.growth = np.flatnonzero(np.diff(self.cells) > 0) + 1
+        self.settled_end = 0
+        self.fetched = set()
+        self.tally = {"rounds": 0, "settles": np.zeros(1, dtype=np.int64), "conflicts": 0, "fetches": 0,
+                      "halo_particles": 0, "halo_bytes": 0, "footprint_bytes": 0}
+        self._lay_substrate(n_sub)
+
+    # ------------------------------------------------------------------ local sediment
+    def _lay_substrate(self, n_sub):
+        prep = self.prep
+        capacity = n_sub + int(self.count.sum()) + 1024
+        self.centre = np.zeros((capacity, 3))
+        self.radius = np.zeros(capacity)
+        self.key = np.full(capacity, -1, dtype=np.int64)
+        grid_state = grid_module.grid_new(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.first_cell,
+                                          capacity, prep.polygon, prep.n_sides)
+        region = self.layout.region(self.rank) if self.rank < self.layout.n_blocks else np.array([1.0, 0.0])
+        self.n_used, self.grid = blocks.lay_substrate(prep.substrate_positions, prep.substrate_radii, region,
+                                                      self.centre, self.radius, self.key, grid_state)
+        self.n_substrate = self.n_used
+
+    def _reserve(self, n_spheres):
+        """Room for ``n_spheres`` more spheres; returns the first free slot."""
+        need = self.n_used + n_spheres
+        if need > len(self.radius):
+            capacity = max(need, 2 * len(self.radius))
+            self.centre = _grown(self.centre, capacity, 0.0)
+            self.radius = _grown(self.radius, capacity, 0.0)
+            self.key = _grown(self.key, capacity, -1)
+            grid_state = list(self.grid)
+            grid_state[4] = _grown(grid_state[4], capacity, -1)
+            self.grid = tuple(grid_state)
+        first = self.n_used
+        self.n_used = need
+        return first
+
+    def _give_slots(self, first_row, last_row):
+        for o in range(first_row, last_row):
+            if self.slot[o] < 0:
+                self.slot[o] = self._reserve(int(self.count[o]))
+
+    def _set_cell(self, cell):
+        if self.grid[0][6] != cell:
+            self.grid = blocks.grid_with_cell(self.grid, cell, self.centre, self.radius, self.key)
+
+    def _settle(self, first_row, last_row):
+        prep = self.prep
+        self._give_slots(first_row, last_row)
+        self.grid = blocks.settle_rows(
+            first_row, last_row, self.settled_end, self.index, *prep.kernel_inputs(), self.grid, self.centre,
+            self.radius, self.key, *prep.kernel_settings(), self.status, self.footprint, self.rectangle,
+            self.slot, self.count, self.first_key, self.com, self.rot, self.contacts, self.state, self.events,
+            self.steps, self.chunks, self.spheres, self.sphere_row, self.margin, self.n_max, self.tally["settles"])
+        self.settled_end = max(self.settled_end, last_row)
+
+    def _withdraw(self, row):
+        if self.status[row] in (PRESENT, STOPPED):
+            blocks.withdraw(row, self.settled_end, self.status, self.footprint, self.rectangle, self.slot, self.count,
+                            self.centre, self.radius, self.grid, self.margin)
+
+    def _insert(self, parcel, first_row):
+        """Committed particles of other ranks (a :func:`_parcel`) join the local sediment."""
+        counts, footprints, keys, centres, radii = parcel
+        first = self._reserve(len(radii))
+        self.grid = blocks.insert_committed(len(counts), counts, footprints, keys, centres, radii, first,
+                                            self.centre, self.radius, self.key, self.grid, first_row,
+                                            self.settled_end, self.status, self.footprint, self.rectangle,
+                                            self.slot, self.count, self.margin)
+
+    def _parcel(self, rows):
+        """The spheres of ``rows`` as sent to another rank: counts, footprints, keys, wrapped centres, radii."""
+        counts = self.count[rows]
+        slots = _spans(self.slot[rows], counts)
+        return counts, self.footprint[rows], self.key[slots], self.centre[slots], self.radius[slots]
+
+    # ------------------------------------------------------------------ rounds
+    def run(self) -> DecomposedDeposition:
+        n_particles = len(self.prep.particle_shape)
+        frontier = 0
+        stopped_at = -1
+        while frontier < n_particles and stopped_at < 0:
+            self.tally["rounds"] += 1
+            self._set_cell(self.prep.first_cell if frontier == 0 else self.cells[frontier - 1])
+            end = self._window_end(frontier, n_particles)
+            self.margin = _column_side(self.prep, self.cells[end - 1])
+            first_row, last_row = np.searchsorted(self.index, [frontier, end])
+            self._settle(first_row, last_row)
+            others = self._share_footprints(first_row, last_row)
+            failure = self._first_failure(first_row, last_row, others, end)
+            new_frontier, reason = divmod(failure, N_FAILURES)
+            committed_end = np.searchsorted(self.index, min(new_frontier, end))
+            self._commit(first_row, committed_end)
+            if new_frontier >= end:
+                new_frontier = end
+            elif reason == FAIL_CONFLICT:
+                self.tally["conflicts"] += 1
+                if self._owns(new_frontier):
+                    self._withdraw(self._row(new_frontier))
+            elif reason == FAIL_REGION:
+                self.tally["fetches"] += 1
+                if self._fetch_and_settle(new_frontier):
+                    stopped_at = new_frontier
+                else:
+                    new_frontier += 1
+                    self._commit(committed_end, np.searchsorted(self.index, new_frontier))
+            else:  # FAIL_STOPPED: the serial run stops at this particle too
+                stopped_at = new_frontier
+            frontier = new_frontier
+        return self._share(stopped_at)
+
+    def _window_end(self, frontier, n_particles):
+        """A window never spans a growth of the grid's cell: a particle larger than all before is
+        settled alone, and the ranks rebuild their grids after it."""
+        at = np.searchsorted(self.growth, frontier)
+        if at < len(self.growth) and self.growth[at] == frontier:
+            return frontier + 1
+        end = min(frontier + self.window, n_particles)
+        later = self.growth[np.searchsorted(self.growth, frontier, side="right"):]
+        if len(later):
+            end = min(end, int(later[0]))
+        return end
+
+    def _owns(self, particle):
+        row = np.searchsorted(self.index, particle)
+        return row < len(self.index) and self.index[row] == particle
+
+    def _row(self, particle):
+        return int(np.searchsorted(self.index, particle))
+
+    def _destinations(self):
+        return [q for q in range(self.layout.n_blocks) if q != self.rank]
+
+    def _share_footprints(self, first_row, last_row):
+        """Every rank's window footprints that meet this rank's region, sorted by particle."""
+        outgoing = [None] * self.comm.Get_size()
+        boxes = self.footprint[first_row:last_row]
+        for q in self._destinations():
+            region = self.layout.region(q)
+            met = blocks.rows_meeting(boxes, region[0], region[1], self.length[0], self.periodic)
+            outgoing[q] = (self.index[first_row:last_row][met], boxes[met])
+            self.tally["footprint_bytes"] += outgoing[q][0].nbytes + outgoing[q][1].nbytes
+        incoming = [part for part in self.comm.alltoall(outgoing) if part is not None]
+        index = np.concatenate([p[0] for p in incoming] + [np.zeros(0, dtype=np.int64)])
+        footprints = np.concatenate([p[1] for p in incoming] + [np.zeros((0, 4))])
+        order = np.argsort(index, kind="stable")
+        return index[order], footprints[order]
+
+    def _first_failure(self, first_row, last_row, others, end):
+        from mpi4py import MPI
+        none = end * N_FAILURES
+        mine = none
+        if self.rank < self.layout.n_blocks:
+            code = blocks.first_failure(first_row, last_row, self.index, self.status, self.rectangle,
+                                        self.layout.region(self.rank), others[0], others[1], len(others[0]),
+                                        self.margin, self.length[0], self.length[1], self.periodic)
+            if code >= 0:
+                mine = code
+        return int(self.comm.allreduce(mine, op=MPI.MIN))
+
+    def _commit(self, first_row, last_row):
+        """Rows ``first_row .. last_row - 1`` are committed: final, and sent to the ranks whose region
+        holds one of their sphere centres.  Collective."""
+        self.status[first_row:last_row] = FINAL
+        self._share_committed(first_row, last_row)
+
+    def _share_committed(self, first_row, last_row):
+        """Send the newly committed rows to the ranks whose region holds one of their sphere centres;
+        insert what the others send."""
+        rows = np.arange(first_row, last_row)
+        outgoing = [None] * self.comm.Get_size()
+        for q in self._destinations():
+            region = self.layout.region(q)
+            box = np.array([region[0], region[1], np.inf, -np.inf])
+            inside = blocks.rows_with_centre_in(rows, self.slot, self.count, self.centre, box, self.length[0],
+                                                self.length[1], self.periodic)
+            if np.any(inside):
+                outgoing[q] = self._parcel(rows[inside])
+                self.tally["halo_particles"] += int(np.count_nonzero(inside))
+                self.tally["halo_bytes"] += sum(a.nbytes for a in outgoing[q])
+        for parcel in self.comm.alltoall(outgoing):
+            if parcel is not None:
+                self._insert(parcel, last_row)
+
+    def _fetch_and_settle(self, particle):
+        """Settle ``particle``, at the frontier, on the committed spheres its owner fetches from every
+        rank, until its rectangle stays in what the owner holds; returns whether it stopped at the
+        event limit.  Collective."""
+        owner = int(self.layout.owners(self.prep.particle_drop_xy[particle:particle + 1, 0])[0])
+        reach = 2.0 * self.margin
+        region = self.layout.region(owner)
+        row = self._row(particle) if self.rank == owner else -1
+        extent = self.comm.bcast(self._widened(row, reach) if row >= 0 else None, root=owner)
+        while True:
+            parts = self.comm.gather(self._committed_in(extent, region, particle), root=owner)
+            message = None
+            if self.rank == owner:
+                for source, parcel in enumerate(parts):
+                    if source != owner:  # the owner's own particles are in its sediment
+                        self._insert(self._not_fetched(parcel), row)
+                self._set_cell(self.prep.first_cell if particle == 0 else self.cells[particle - 1])
+                self._withdraw(row)
+                self._settle(row, row + 1)
+                box = self._widened(row, self.margin)
+                done = (blocks.interval_within(box[0], box[1], region[0], region[1], self.length[0], self.periodic)
+                        or _box_within(box, extent, self.length, self.periodic))
+                message = (done, _hull(extent, self._widened(row, reach)), self.status[row] == STOPPED)
+            done, extent, stopped = self.comm.bcast(message, root=owner)
+            if done:
+                return stopped
+
+    def _widened(self, row, by):
+        box = self.rectangle[row]
+        return np.array([box[0] - by, box[1] + by, box[2] - by, box[3] + by])
+
+    def _committed_in(self, extent, region, particle):
+        """This rank's committed particles (and substrate spheres in its block) with a sphere centre in
+        ``extent`` and none in the owner's ``region`` (which holds those already)."""
+        final = np.flatnonzero(self.status == FINAL)
+        x_only = np.array([region[0], region[1], np.inf, -np.inf])
+        inside = blocks.rows_with_centre_in(final, self.slot, self.count, self.centre, extent, self.length[0],
+                                            self.length[1], self.periodic)
+        held = blocks.rows_with_centre_in(final, self.slot, self.count, self.centre, x_only, self.length[0],
+                                          self.length[1], self.periodic)
+        counts, footprints, keys, centres, radii = self._parcel(final[inside & ~held])
+        substrate = np.arange(self.n_substrate)
+        single = np.ones(len(substrate), dtype=np.int64)
+        in_extent = blocks.rows_with_centre_in(substrate, substrate, single, self.centre, extent, self.length[0],
+                                               self.length[1], self.periodic)
+        in_region = blocks.rows_with_centre_in(substrate, substrate, single, self.centre, x_only, self.length[0],
+                                               self.length[1], self.periodic)
+        mine = self.layout.owners(self.centre[:self.n_substrate, 0]) == self.rank
+        lay = substrate[in_extent & ~in_region & mine]
+        points = self.centre[lay]
+        substrate_footprints = np.stack([points[:, 0], points[:, 0], points[:, 1], points[:, 1]], axis=1)
+        return (np.concatenate([counts, np.ones(len(lay), dtype=np.int64)]),
+                np.concatenate([footprints, substrate_footprints]), np.concatenate([keys, self.key[lay]]),
+                np.concatenate([centres, points]), np.concatenate([radii, self.radius[lay]]))
+
+    def _not_fetched(self, parcel):
+        """The particles of ``parcel`` not fetched before (by their first key), now marked fetched."""
+        counts, footprints, keys, centres, radii = parcel
+        starts = np.cumsum(counts) - counts
+        new = np.array([int(keys[s]) not in self.fetched for s in starts], dtype=bool)
+        self.fetched.update(int(keys[s]) for s in starts[new])
+        spheres = np.repeat(new, counts)
+        return counts[new], footprints[new], keys[spheres], centres[spheres], radii[spheres]
+
+    def _share(self, stopped_at) -> DecomposedDeposition:
+        done = len(self.prep.particle_shape) if stopped_at < 0 else stopped_at
+        rows = np.flatnonzero((self.status == FINAL) & (self.index < done))
+        spheres = _spans(self.sphere_row[rows], self.count[rows])
+        slots = _spans(self.slot[rows], self.count[rows])
+        tally = dict(self.tally, settles=int(self.tally["settles"][0]), particles=len(rows),
+                     chunk_steps=int(self.chunks[rows].sum()))
+        return DecomposedDeposition(self.index[rows], self.com[rows], self.rot[rows], self.contacts[rows],
+                                    self.state[rows], self.events[rows], self.steps[rows], self.count[rows],
+                                    self.spheres[spheres], self.radius[slots], stopped_at, tally)
+
+
+def _box_within(box, extent, length, periodic):
+    return (blocks.interval_within(box[0], box[1], extent[0], extent[1], length[0], periodic)
+            and blocks.interval_within(box[2], box[3], extent[2], extent[3], length[1], periodic))
+
+
+def _hull(a, b):
+    """The smallest rectangle holding rectangles ``a`` and ``b`` (not across a periodic seam)."""
+    return np.array([min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3])])
+
+
+def _spans(starts, counts):
+    """The indices ``starts[k] .. starts[k] + counts[k] - 1`` of every ``k``, one after the other."""
+    counts = np.asarray(counts, dtype=np.int64)
+    return np.repeat(np.asarray(starts, dtype=np.int64) - (np.cumsum(counts) - counts), counts) \
+        + np.arange(int(counts.sum()), dtype=np.int64)
+
+
+def _grown(array, rows, fill):
+    grown = np.full((rows,) + array.shape[1:], fill, dtype=array.dtype)
+    grown[:len(array)] = array
+    return grown
+
+
+def _column_side(prep, cell) -> float:
+    """The largest side of the grid's columns for ``cell``: a cell that meets a rectangle holds
+    centres within this distance of it."""
+    geom = grid_module.grid_new(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, cell, 1, prep.polygon,
+                                prep.n_sides)[0]
+    return float(max(geom[4], geom[5]))
