@@ -30,6 +30,7 @@ the particles being settled by other ranks (checked in 3).  So its descent read 
 descent reads, step by step, and gives the same bits.
 """
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,11 +41,24 @@ from parsim.core.sdbd import blocks, grid as grid_module
 from parsim.core.sdbd.blocks import (ABSENT, FAIL_CONFLICT, FAIL_REGION, FAIL_STOPPED, FINAL, N_FAILURES, PRESENT,
                                      STOPPED)
 from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, N_EVENT_KINDS
+from parsim.errors import JobError
+from parsim.parallel.collective import abort_if_alone
 
-__all__ = ["BlockLayout", "deposit_decomposed", "DecomposedDeposition", "default_halo"]
+__all__ = ["BlockLayout", "deposit_decomposed", "DecomposedDeposition", "DecompositionError", "InvalidDeposition",
+           "default_halo"]
 
 #: particles per rank in a round's window of drop indices
 WINDOW_PER_RANK = 512
+
+
+class InvalidDeposition(JobError, ValueError):
+    """An argument of :func:`deposit_decomposed` that :func:`parsim.core.sdbd.deposit` would refuse too
+    (a ValueError, and a JobError: one line names it when a rank alone meets it)."""
+
+
+class DecompositionError(RuntimeError):
+    """A committed particle's descent read sediment that changed afterwards (a defect of the
+    decomposition, found by the checks of ``deposit_decomposed(..., check=True)``)."""
 
 
 def default_halo(prep) -> float:
@@ -152,30 +166,40 @@ def deposit_decomposed(comm, shape_offsets, shape_radii, shape_start, particle_s
                        trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
                        wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX, cylinder=None,
                        substrate_positions=None, substrate_radii=None, halo=None,
-                       window_per_rank=WINDOW_PER_RANK) -> DecomposedDeposition:
+                       window_per_rank=WINDOW_PER_RANK, check=False) -> DecomposedDeposition:
     """:func:`parsim.core.sdbd.deposit` spread over the ranks of ``comm`` (collective; every rank
     passes the same arguments): each rank returns its share, whose :meth:`~DecomposedDeposition.gather`
     is bitwise the serial result.  ``halo`` is how far a rank's region reaches beyond its block
     (default :func:`default_halo`); a box whose blocks would be narrower than the halo is settled
-    whole by rank 0.  ``window_per_rank`` sets the drop indices of a round (that many per rank)."""
-    prep = sdbd.prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                                   particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
-                                   trial_angle, cycle_n, cycle_eps, max_events_per_particle, wall_contact, container,
-                                   cylinder, substrate_positions, substrate_radii)
-    halo = default_halo(prep) if halo is None else float(halo)
-    if not (np.isfinite(halo) and halo > 0):
-        raise ValueError(f"halo must be a finite length > 0, got {halo}")
-    layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.particle_drop_xy[:, 0],
-                         comm.Get_size(), halo)
-    if layout.length / layout.n_blocks < halo:  # blocks narrower than the halo: the task runs whole
-        layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.particle_drop_xy[:, 0], 1, halo)
-    return _RankRun(comm, prep, layout, max(1, int(window_per_rank)) * layout.n_blocks).run()
+    whole by rank 0.  ``window_per_rank`` sets the drop indices of a round (that many per rank).
+    With ``check``, every particle's owner fingerprints the sediment its descent read when it settles
+    it and again when it commits it, and raises :class:`DecompositionError` if they differ."""
+    try:
+        try:
+            prep = sdbd.prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+                                           particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy,
+                                           lateral, floor, trial_angle, cycle_n, cycle_eps, max_events_per_particle,
+                                           wall_contact, container, cylinder, substrate_positions, substrate_radii)
+            halo = default_halo(prep) if halo is None else float(halo)
+            if not (np.isfinite(halo) and halo > 0):
+                raise ValueError(f"halo must be a finite length > 0, got {halo}")
+        except ValueError as error:
+            raise InvalidDeposition(str(error)) from error
+        layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.particle_drop_xy[:, 0],
+                             comm.Get_size(), halo)
+        if layout.length / layout.n_blocks < halo:  # blocks narrower than the halo: the task runs whole
+            layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.particle_drop_xy[:, 0], 1,
+                                 halo)
+        return _RankRun(comm, prep, layout, max(1, int(window_per_rank)) * layout.n_blocks, check).run()
+    except BaseException as error:
+        abort_if_alone(comm, error)  # the other ranks would wait in a collective: end them all, with one line
+        raise
 
 
 class _RankRun:
     """The rounds of :func:`deposit_decomposed` on one rank (see the module docs)."""
 
-    def __init__(self, comm, prep, layout, window):
+    def __init__(self, comm, prep, layout, window, check):
         self.comm = comm
         self.rank = comm.Get_rank()
         self.prep = prep
@@ -202,6 +226,7 @@ class _RankRun:
         self.events = np.zeros((n, N_EVENT_KINDS), dtype=np.int32)
         self.steps = np.zeros(n, dtype=np.int32)
         self.chunks = np.zeros(n, dtype=np.int64)
+        self.signatures = np.zeros((n if check else 0, 2), dtype=np.int64)
         self.spheres = np.zeros((int(self.count.sum()), 3))
         self.n_max = int(np.max(np.diff(prep.shape_start)))
         self.cells = _cells_after(prep)
@@ -209,7 +234,7 @@ class _RankRun:
         self.settled_end = 0
         self.fetched = set()
         self.tally = {"rounds": 0, "settles": np.zeros(1, dtype=np.int64), "conflicts": 0, "fetches": 0,
-                      "halo_particles": 0, "halo_bytes": 0, "footprint_bytes": 0}
+                      "halo_particles": 0, "halo_bytes": 0, "footprint_bytes": 0, "settle_seconds": 0.0}
         self._lay_substrate(n_sub)
 
     # ------------------------------------------------------------------ local sediment
@@ -253,17 +278,23 @@ class _RankRun:
     def _settle(self, first_row, last_row):
         prep = self.prep
         self._give_slots(first_row, last_row)
+        given_top = np.nan
+        if last_row == first_row + 1:
+            particle = int(self.index[first_row])
+            if self.cells[particle] > self.grid[0][6]:  # the serial run drops it, then grows the grid
+                given_top = blocks.drop_top(particle, *prep.kernel_inputs(), self.grid, self.centre, self.radius,
+                                            prep.length_scale, self.n_max)
+                self._set_cell(self.cells[particle])
         self.grid = blocks.settle_rows(
             first_row, last_row, self.settled_end, self.index, *prep.kernel_inputs(), self.grid, self.centre,
             self.radius, self.key, *prep.kernel_settings(), self.status, self.footprint, self.rectangle,
             self.slot, self.count, self.first_key, self.com, self.rot, self.contacts, self.state, self.events,
-            self.steps, self.chunks, self.spheres, self.sphere_row, self.margin, self.n_max, self.tally["settles"])
+            self.steps, self.chunks, self.spheres, self.sphere_row, self.margin, self.n_max, self.tally["settles"],
+            self.signatures, given_top)
         self.settled_end = max(self.settled_end, last_row)
 
     def _withdraw(self, row):
-        if self.status[row] in (PRESENT, STOPPED):
-            blocks.withdraw(row, self.settled_end, self.status, self.footprint, self.rectangle, self.slot, self.count,
-                            self.centre, self.radius, self.grid, self.margin)
+        blocks.withdraw(row, self.status, self.slot, self.count, self.centre, self.radius, self.grid)
 
     def _insert(self, parcel, first_row):
         """Committed particles of other ranks (a :func:`_parcel`) join the local sediment."""
@@ -291,7 +322,9 @@ class _RankRun:
             end = self._window_end(frontier, n_particles)
             self.margin = _column_side(self.prep, self.cells[end - 1])
             first_row, last_row = np.searchsorted(self.index, [frontier, end])
+            started = time.perf_counter()
             self._settle(first_row, last_row)
+            self.tally["settle_seconds"] += time.perf_counter() - started
             others = self._share_footprints(first_row, last_row)
             failure = self._first_failure(first_row, last_row, others, end)
             new_frontier, reason = divmod(failure, N_FAILURES)
@@ -369,6 +402,13 @@ class _RankRun:
         holds one of their sphere centres.  Collective."""
         self.status[first_row:last_row] = FINAL
         self._share_committed(first_row, last_row)
+        if len(self.signatures):
+            changed = blocks.first_changed(first_row, last_row, self.signatures, self.rectangle, self.margin,
+                                           self.first_key, self.status, self.grid, self.centre, self.key)
+            if changed >= 0:
+                raise DecompositionError(
+                    f"particle {self.index[changed]} was committed, but the sediment it read changed after it "
+                    f"was settled: the decomposed sediment would not be the serial one")
 
     def _share_committed(self, first_row, last_row):
         """Send the newly committed rows to the ranks whose region holds one of their sphere centres;

@@ -8,24 +8,28 @@ rolled out of the region.  Every sphere carries its *key*, its index in the seri
 list in decreasing key (:func:`.grid.grid_insert_ordered`), as the serial run does, whatever
 the order in which spheres arrive.
 
-A row is *absent*, *present* (settled speculatively, its spheres in the sediment), *stopped*
-(settled speculatively into the event limit, no spheres) or *final*.  Each settled row keeps
-its footprint (the lateral bounding box of its sphere centres) and its read rectangle
-(:mod:`.reads`).  The kernels keep this invariant:
+A row is *absent*, *present* (settled speculatively, its spheres in the sediment), *withdrawn*
+(taken out, its slots keeping its old centres), *stopped* (settled speculatively into the event
+limit, no spheres) or *final*.  Each settled row keeps its footprint (the lateral bounding box of
+its sphere centres) and its read rectangle (:mod:`.reads`).  The kernels keep this invariant:
 
     every present row was settled on what the local sediment now holds in its read rectangle
-    widened by a column, leaving out the particles dropped after it.
+    widened by a column, leaving out the particles dropped after it and the rows withdrawn
+    before it, which are settled again (in drop order) before anything uses it.
 
 A descent reads only sediment spheres whose cells meet its rectangle, so such a row equals the
 serial particle as soon as the serial sediment before it agrees with the local one there: the
-check of :func:`first_failure`.  The invariant holds because every change of the local sediment
-takes out (*withdraws*) the present rows it touches, later rows only, in drop order:
+check of :func:`first_failure`.  Every change of the local sediment withdraws the later present
+rows it touches:
 
-* a row settled again withdraws the later present rows its new rectangle meets before its
-  spheres join (they were not there in the serial run), settles again if there were any, and
-  after joining withdraws the later rows whose rectangle meets its spheres;
-* a withdrawn row withdraws the later rows whose rectangle meets its old spheres;
+* a row being settled withdraws the later present rows with spheres in its rectangle (they were
+  not there in the serial run) and settles again if there were any;
+* a row settled again where it was before (bitwise) changes nothing; one that moved, or was
+  absent, withdraws the later rows whose rectangle meets its old or new spheres;
 * committed spheres of other ranks (halo, fetched) withdraw the rows whose rectangle they meet.
+
+:func:`read_signature` fingerprints what a row read, when it is settled and when it is committed,
+to check the invariant in the tests.
 """
 
 import math
@@ -39,15 +43,15 @@ from parsim.core.sdbd.bundles import (Settings, grid_arrays, new_grid, new_parti
 from parsim.core.sdbd.constants import EVENT_LIMIT, LATERAL_PERIODIC, LATERAL_WALLS, WALL_FRICTIONLESS, VIRTUAL_ANGLE
 from parsim.core.sdbd.cycling import new_descent_history
 from parsim.core.sdbd.engine import _descend, _search_margin, largest_diameter, regrid
-from parsim.core.sdbd.grid import grid_insert_ordered, grid_remove, wrap_position
+from parsim.core.sdbd.grid import grid_collect_growing, grid_insert_ordered, grid_remove, wrap_position
 from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.rotation import matrix_to_quat
 
-__all__ = ["ABSENT", "PRESENT", "STOPPED", "FINAL", "settle_rows", "first_failure", "insert_committed",
-           "withdraw", "grid_with_cell", "lay_substrate", "rows_meeting", "rows_with_centre_in", "box_meets",
+__all__ = ["ABSENT", "PRESENT", "STOPPED", "FINAL", "WITHDRAWN", "settle_rows", "first_failure", "insert_committed",
+           "withdraw", "grid_with_cell", "lay_substrate", "read_signature", "first_changed", "drop_top", "rows_meeting", "rows_with_centre_in", "box_meets",
            "interval_within"]
 
-ABSENT, PRESENT, STOPPED, FINAL = 0, 1, 2, 3
+ABSENT, PRESENT, STOPPED, FINAL, WITHDRAWN = 0, 1, 2, 3, 4
 #: why a row cannot be committed (:func:`first_failure`), in the order they are examined
 FAIL_REGION, FAIL_CONFLICT, FAIL_STOPPED = 0, 1, 2
 N_FAILURES = 3
@@ -91,33 +95,18 @@ def box_meets(box, other, margin, length_x, length_y, periodic):
 
 
 @jit
-def withdraw(row, last, status, footprint, rectangle, slot, count, centre, radius, grid_state, margin):
-    """Take row ``row`` (present or stopped) out of the local sediment, and with it every later
-    present row up to ``last`` (exclusive) whose rectangle widened by ``margin`` meets the spheres
-    of a row withdrawn; their status becomes ABSENT.  ``count[o]`` is row ``o``'s number of
-    spheres, from slot ``slot[o]`` on."""
+def withdraw(row, status, slot, count, centre, radius, grid_state):
+    """Take row ``row`` (present or stopped) out of the local sediment: a present row becomes
+    WITHDRAWN (its slots keep its old centres, out of the grid, for :func:`settle_rows` to compare),
+    a stopped one ABSENT.  ``count[row]`` is its number of spheres, from slot ``slot[row]`` on."""
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_state
-    periodic = igeom[0] == LATERAL_PERIODIC
-    gone = np.empty(last - row, dtype=np.int64)
-    n_gone = 0
-    for o in range(row, last):
-        if status[o] != PRESENT and status[o] != STOPPED:
-            continue
-        hit = o == row
-        for g in range(n_gone):
-            if hit:
-                break
-            hit = box_meets(rectangle[o], footprint[gone[g]], margin, geom[2], geom[3], periodic)
-        if not hit:
-            continue
-        if status[o] == PRESENT:
-            for j in range(slot[o], slot[o] + count[o]):
-                grid_remove(geom, igeom, head, col_top, nxt, hkeys, hval, j, centre[j, 0], centre[j, 1],
-                            centre[j, 2])
-                radius[j] = 0.0  # out of the grid: not rebuilt into it
-            gone[n_gone] = o
-            n_gone += 1
-        status[o] = ABSENT
+    if status[row] == PRESENT:
+        for j in range(slot[row], slot[row] + count[row]):
+            grid_remove(geom, igeom, head, col_top, nxt, hkeys, hval, j, centre[j, 0], centre[j, 1], centre[j, 2])
+            radius[j] = 0.0  # out of the grid: not rebuilt into it
+        status[row] = WITHDRAWN
+    elif status[row] == STOPPED:
+        status[row] = ABSENT
 
 
 @jit
@@ -137,7 +126,7 @@ def _withdraw_met(first, last, box, by_footprint, status, footprint, rectangle, 
             met = ((status[o] == PRESENT or status[o] == STOPPED)
                    and box_meets(rectangle[o], box, margin, geom[2], geom[3], periodic))
         if met:
-            withdraw(o, last, status, footprint, rectangle, slot, count, centre, radius, grid_state, margin)
+            withdraw(o, status, slot, count, centre, radius, grid_state)
             any_met = True
     return any_met
 
@@ -189,13 +178,14 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
                 particle_scale, particle_rotation, particle_drop_xy, grid_state, centre, radius, key, floor_mode,
                 wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell, status, footprint, rectangle, slot,
                 count, first_key, out_com, out_rot, out_contacts, out_state, out_events, out_steps, out_chunks,
-                out_sphere, sphere_row, margin, n_max, settles):
+                out_sphere, sphere_row, margin, n_max, settles, signatures, given_top):
     """Settle the absent rows among ``first .. last - 1`` in drop order (row ``o`` is particle
     ``index[o]``), keeping the invariant of the module docs; rows from ``settled_end`` on were
     never settled.  Each writes its results into the ``out_*`` rows (``out_sphere`` from row
     ``sphere_row[o]`` on: its spheres as the particle holds them, a periodic box's beyond it
-    included), its footprint and its rectangle; ``settles[0]`` counts the descents.  Returns the
-    grid's arrays."""
+    included), its footprint and its rectangle; ``settles[0]`` counts the descents.  When
+    ``signatures`` has rows, row ``o``'s holds the :func:`read_signature` of what it read.
+    ``given_top``: see :func:`_settle`.  Returns the grid's arrays."""
     virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
     settings = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
                         grid_state[1][0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, False)
@@ -208,7 +198,8 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
     buf = np.empty(4096, dtype=np.int64)
     periodic = grid_state[1][0] == LATERAL_PERIODIC
     for o in range(first, last):
-        if status[o] != ABSENT:
+        was = status[o]
+        if was != ABSENT and was != WITHDRAWN:
             continue
         later = max(settled_end, o + 1)
         while True:
@@ -217,29 +208,41 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
                                                         particle_shape, particle_scale, particle_rotation,
                                                         particle_drop_xy, sediment, grid, ell, particle, work,
                                                         history, settings, out_events[o], trace, buf, periodic,
-                                                        key)
+                                                        given_top)
             # later rows were not there in the serial run: settle again without those it read
             if not _withdraw_met(o + 1, later, work.reads, True, status, footprint, rectangle, slot, count,
                                  centre, radius, grid_arrays(grid), margin):
                 break
         for k in range(read_box.N_READS):
             rectangle[o, k] = work.reads[k]
+        if signatures.shape[0]:
+            count_read, digest = read_signature(rectangle[o], margin, first_key[o], grid_arrays(grid), centre, key)
+            signatures[o, 0] = count_read
+            signatures[o, 1] = np.int64(digest)
         out_steps[o] = steps
         out_chunks[o] = chunks
         out_state[o] = state
+        old = footprint[o].copy()
+        moved = True
         if state == EVENT_LIMIT:
             status[o] = STOPPED
             footprint[o, 0] = math.inf
             footprint[o, 1] = -math.inf
             footprint[o, 2] = math.inf
             footprint[o, 3] = -math.inf
-            continue
-        _freeze_row(o, n, particle, n_c, sediment, grid, key, slot[o], first_key[o], out_com, out_rot, out_contacts,
-                    out_sphere, sphere_row[o], footprint)
-        status[o] = PRESENT
-        # later rows settled while this one was elsewhere or absent
-        _withdraw_met(o + 1, later, footprint[o], False, status, footprint, rectangle, slot, count, centre, radius,
-                      grid_arrays(grid), margin)
+        else:
+            moved = was != WITHDRAWN or not _same_spheres(n, particle, centre, slot[o], grid.geom, grid.igeom)
+            _freeze_row(o, n, particle, n_c, sediment, grid, key, slot[o], first_key[o], out_com, out_rot,
+                        out_contacts, out_sphere, sphere_row[o], footprint)
+            status[o] = PRESENT
+        # later rows settled while this one was elsewhere or absent read what changed
+        if moved:
+            if was == WITHDRAWN:
+                _withdraw_met(o + 1, later, old, False, status, footprint, rectangle, slot, count, centre, radius,
+                              grid_arrays(grid), margin)
+            if state != EVENT_LIMIT:
+                _withdraw_met(o + 1, later, footprint[o], False, status, footprint, rectangle, slot, count, centre,
+                              radius, grid_arrays(grid), margin)
         settled_end = later
     return grid.memory  # the arrays themselves: borrowed views never go back to Python
 
@@ -247,18 +250,18 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
 @jit
 def _settle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation,
             particle_drop_xy, sediment, grid, ell, particle, work, history, settings, events, trace, buf, periodic,
-            key):
-    """Drop particle ``p`` and let it descend as the serial loop does (:func:`.engine.run_deposition`;
-    a particle with a sphere larger than any before grows the grid's cell after its drop); its
-    rectangle is in ``work.reads``.  Returns ``(n, state, n_c, steps, chunk_ends, buf)``."""
+            given_top):
+    """Drop particle ``p`` and let it descend as the serial loop does (:func:`.engine.run_deposition`);
+    its rectangle is in ``work.reads``.  A particle with a sphere larger than any before is dropped
+    at ``given_top`` (:func:`drop_top`, on the grid before it grew), else ``given_top`` is NaN.
+    Returns ``(n, state, n_c, steps, chunk_ends, buf)``."""
     for k in range(events.shape[0]):
         events[k] = 0
     read_box.forget(work.reads)
-    n = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                      particle_rotation, particle_drop_xy, sediment, grid, ell, particle, work.reads)
-    cell = largest_diameter(n, particle)
-    if cell > grid.geom[6]:
-        regrid_by_key(grid, cell, sediment.centre, sediment.radius, key)
+    n, _ = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+                         particle_rotation, particle_drop_xy, sediment, grid, ell, particle, work.reads, given_top)
+    if largest_diameter(n, particle) > grid.geom[6]:
+        raise ValueError("a particle larger than the grid's cell: grow the grid first (drop_top)")
     state, n_c, steps, chunk_ends, _, buf = _descend(n, particle, work, history, sediment, grid, settings, events,
                                                      False, trace, buf)
     read_box.note_spheres(work.reads, n, particle, _search_margin(grid, ell))
@@ -268,6 +271,17 @@ def _settle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle
         particle.com[1] = cy
         place_spheres(n, particle)
     return n, state, n_c, steps, chunk_ends, buf
+
+
+@jit(inline="always")
+def _same_spheres(n, particle, centre, first_slot, geom, igeom):
+    """Whether the particle's ``n`` spheres, wrapped, are bitwise the centres kept in its slots."""
+    for i in range(n):
+        wx, wy = wrap_position(geom, igeom, particle.centre[i, 0], particle.centre[i, 1])
+        j = first_slot + i
+        if wx != centre[j, 0] or wy != centre[j, 1] or particle.centre[i, 2] != centre[j, 2]:
+            return False
+    return True
 
 
 @jit
@@ -388,3 +402,65 @@ def rows_with_centre_in(rows, slot, count, centre, box, length_x, length_y, peri
                 inside[r] = True
                 break
     return inside
+
+
+@jit(inline="always")
+def _mix(h):
+    """A 64-bit finaliser (splitmix64): nearby inputs give unrelated outputs."""
+    h = (h ^ (h >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    h = (h ^ (h >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return h ^ (h >> np.uint64(31))
+
+
+@jit
+def read_signature(box, margin, below_key, grid_state, centre, key):
+    """A fingerprint of the sediment spheres of key below ``below_key`` whose centre lies in ``box``
+    widened by ``margin``: their number and an order-free hash of their keys and centres' bits.
+    Taken when a row is settled and again when it is committed, it checks the invariant that makes
+    the decomposed sediment the serial one: what a descent read is final when it is committed."""
+    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_state
+    periodic = igeom[0] == LATERAL_PERIODIC
+    buf = np.empty(1024, dtype=np.int64)
+    n, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval, box[0] - margin, box[1] + margin,
+                                  box[2] - margin, box[3] + margin, 0.0, (head.shape[0] + 1) * geom[6], buf)
+    count = 0
+    digest = np.uint64(0)
+    bits = centre.view(np.uint64)
+    for s in range(n):
+        j = buf[s]
+        if key[j] >= below_key:
+            continue
+        x = centre[j, 0]
+        y = centre[j, 1]
+        if not (interval_within(x, x, box[0] - margin, box[1] + margin, geom[2], periodic)
+                and interval_within(y, y, box[2] - margin, box[3] + margin, geom[3], periodic)):
+            continue
+        count += 1
+        digest += _mix(np.uint64(key[j]) ^ _mix(bits[j, 0] ^ _mix(bits[j, 1] ^ _mix(bits[j, 2]))))
+    return count, digest
+
+
+@jit
+def first_changed(first, last, signatures, rectangle, margin, first_key, status, grid_state, centre, key):
+    """The first committed row among ``first .. last - 1`` whose :func:`read_signature` now differs
+    from the one taken when it was settled, or -1."""
+    for o in range(first, last):
+        if status[o] != FINAL:
+            continue
+        count_read, digest = read_signature(rectangle[o], margin, first_key[o], grid_state, centre, key)
+        if count_read != signatures[o, 0] or np.int64(digest) != signatures[o, 1]:
+            return o
+    return -1
+
+
+@jit
+def drop_top(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation,
+             particle_drop_xy, grid_state, centre, radius, ell, n_max):
+    """The height above which particle ``p`` is dropped (:func:`.particle.drop_particle`) on this grid:
+    for a particle with a sphere larger than any before, taken before the grid grows (the serial
+    run drops it, then grows the grid's cell)."""
+    particle = new_particle(n_max)
+    _, top = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
+                           particle_rotation, particle_drop_xy, sediment_in(centre, radius), new_grid(*grid_state),
+                           ell, particle, np.empty(0), math.nan)
+    return top

@@ -35,12 +35,13 @@ def place_spheres(n, particle):
 
 @jit(inline="always")
 def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                  particle_rotation, particle_drop_xy, sediment, grid, ell, particle, reads):
+                  particle_rotation, particle_drop_xy, sediment, grid, ell, particle, reads, given_top):
     """Particle ``p`` at its drop: scaled body offsets and radii, orientation (from
     ``particle_rotation[p]``, any non-zero quaternion), centre of mass above its drop point
     with its lowest sphere ``DROP_MARGIN`` above the sediment within its reach
-    (:func:`.grid.top_near`: the particle's extent plus the largest sediment radius); returns
-    its number of spheres; the square it read joins ``reads`` (:mod:`.reads`).  The sediment beyond that reach, which the vertical fall cannot
+    (:func:`.grid.top_near`: the particle's extent plus the largest sediment radius, or
+    ``given_top`` unless it is NaN); returns its number of spheres and that height; the square it
+    read joins ``reads`` (:mod:`.reads`).  The sediment beyond that reach, which the vertical fall cannot
     touch, does not change the drop, nor therefore the particle's descent."""
     body = particle.body
     rad = particle.radius
@@ -72,12 +73,14 @@ def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, pa
     com[1] = particle_drop_xy[p, 1]
     geom = grid.geom
     reach = extent + 0.5 * geom[6]
-    top = top_near(geom, grid.igeom, grid.head, grid.col_top, grid.nxt, grid.hkeys, grid.hval, sediment.centre,
-                   com[0], com[1], reach)
+    top = given_top
+    if math.isnan(top):
+        top = top_near(geom, grid.igeom, grid.head, grid.col_top, grid.nxt, grid.hkeys, grid.hval, sediment.centre,
+                       com[0], com[1], reach)
     note(reads, com[0] - reach, com[0] + reach, com[1] - reach, com[1] + reach)
     com[2] = top + below + DROP_MARGIN * ell
     place_spheres(n, particle)
-    return n
+    return n, top
 
 
 @jit(inline="always")
