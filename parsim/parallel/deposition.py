@@ -49,6 +49,8 @@ __all__ = ["BlockLayout", "deposit_decomposed", "DecomposedDeposition", "Decompo
 
 #: particles per rank in a round's window of drop indices
 WINDOW_PER_RANK = 512
+#: rows settled between two tests of whether every rank has settled its window
+AHEAD_ROWS = 8
 
 
 class InvalidDeposition(JobError, ValueError):
@@ -231,8 +233,10 @@ class _RankRun:
         self.n_max = int(np.max(np.diff(prep.shape_start)))
         self.cells = _cells_after(prep)
         self.growth = np.flatnonzero(np.diff(self.cells) > 0) + 1
+        self.growth_set = set(self.growth.tolist())
         self.settled_end = 0
         self.fetched = set()
+        self.column_sides = {}
         self.tally = {"rounds": 0, "settles": np.zeros(1, dtype=np.int64), "conflicts": 0, "fetches": 0,
                       "halo_particles": 0, "halo_bytes": 0, "footprint_bytes": 0, "settle_seconds": 0.0}
         self._lay_substrate(n_sub)
@@ -267,9 +271,11 @@ class _RankRun:
         return first
 
     def _give_slots(self, first_row, last_row):
-        for o in range(first_row, last_row):
-            if self.slot[o] < 0:
-                self.slot[o] = self._reserve(int(self.count[o]))
+        """Slots for the rows that have none yet, one after the other."""
+        rows = first_row + np.flatnonzero(self.slot[first_row:last_row] < 0)
+        if len(rows):
+            counts = self.count[rows]
+            self.slot[rows] = self._reserve(int(counts.sum())) + np.cumsum(counts) - counts
 
     def _set_cell(self, cell):
         if self.grid[0][6] != cell:
@@ -320,10 +326,11 @@ class _RankRun:
             self.tally["rounds"] += 1
             self._set_cell(self.prep.first_cell if frontier == 0 else self.cells[frontier - 1])
             end = self._window_end(frontier, n_particles)
-            self.margin = _column_side(self.prep, self.cells[end - 1])
+            self.margin = self._column_side(self.cells[end - 1])
             first_row, last_row = np.searchsorted(self.index, [frontier, end])
             started = time.perf_counter()
             self._settle(first_row, last_row)
+            self._settle_while_waiting(last_row, self._ahead_end(frontier, end, n_particles))
             self.tally["settle_seconds"] += time.perf_counter() - started
             others = self._share_footprints(first_row, last_row)
             failure = self._first_failure(first_row, last_row, others, end)
@@ -347,6 +354,34 @@ class _RankRun:
                 stopped_at = new_frontier
             frontier = new_frontier
         return self._share(stopped_at)
+
+    def _column_side(self, cell):
+        if cell not in self.column_sides:
+            self.column_sides[cell] = _column_side(self.prep, cell)
+        return self.column_sides[cell]
+
+    def _settle_while_waiting(self, first_row, end_row):
+        """Until every rank has settled its window, settle the rows after it (up to ``end_row``), a few
+        at a time: the next windows' work, done while a faster rank would otherwise wait."""
+        done = self.comm.Ibarrier()
+        row = max(first_row, self.settled_end)
+        while not done.Test():
+            if row >= end_row:
+                done.Wait()
+                break
+            self._settle(row, min(row + AHEAD_ROWS, end_row))
+            row = self.settled_end
+
+    def _ahead_end(self, frontier, end, n_particles):
+        """The row after the last one that may be settled ahead of the window: one window further, and
+        never past a growth of the grid's cell."""
+        if end == frontier + 1 and frontier in self.growth_set:
+            return np.searchsorted(self.index, end)
+        ahead = min(end + self.window, n_particles)
+        later = self.growth[np.searchsorted(self.growth, frontier, side="right"):]
+        if len(later):
+            ahead = min(ahead, int(later[0]))
+        return int(np.searchsorted(self.index, ahead))
 
     def _window_end(self, frontier, n_particles):
         """A window never spans a growth of the grid's cell: a particle larger than all before is

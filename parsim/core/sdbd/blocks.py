@@ -38,11 +38,10 @@ import numpy as np
 
 from parsim.core.jit import jit
 from parsim.core.sdbd import reads as read_box
-from parsim.core.sdbd.bundles import (Settings, grid_arrays, new_grid, new_particle, new_workspace, sediment_in,
-                                      set_grid_arrays)
+from parsim.core.sdbd.bundles import Settings, grid_arrays, new_grid, new_particle, new_workspace, sediment_in
 from parsim.core.sdbd.constants import EVENT_LIMIT, LATERAL_PERIODIC, LATERAL_WALLS, WALL_FRICTIONLESS, VIRTUAL_ANGLE
 from parsim.core.sdbd.cycling import new_descent_history
-from parsim.core.sdbd.engine import _descend, _search_margin, largest_diameter, regrid
+from parsim.core.sdbd.engine import _descend, _search_margin, join_sediment, largest_diameter, regrid
 from parsim.core.sdbd.grid import grid_collect_growing, grid_insert_ordered, grid_remove, wrap_position
 from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.rotation import matrix_to_quat
@@ -210,8 +209,8 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
                                                         history, settings, out_events[o], trace, buf, periodic,
                                                         given_top)
             # later rows were not there in the serial run: settle again without those it read
-            if not _withdraw_met(o + 1, later, work.reads, True, status, footprint, rectangle, slot, count,
-                                 centre, radius, grid_arrays(grid), margin):
+            if later == o + 1 or not _withdraw_met(o + 1, later, work.reads, True, status, footprint, rectangle,
+                                                   slot, count, centre, radius, grid_arrays(grid), margin):
                 break
         for k in range(read_box.N_READS):
             rectangle[o, k] = work.reads[k]
@@ -222,7 +221,7 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
         out_steps[o] = steps
         out_chunks[o] = chunks
         out_state[o] = state
-        old = footprint[o].copy()
+        old = (footprint[o, 0], footprint[o, 1], footprint[o, 2], footprint[o, 3])
         moved = True
         if state == EVENT_LIMIT:
             status[o] = STOPPED
@@ -236,9 +235,9 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
                         out_contacts, out_sphere, sphere_row[o], footprint)
             status[o] = PRESENT
         # later rows settled while this one was elsewhere or absent read what changed
-        if moved:
+        if moved and later > o + 1:
             if was == WITHDRAWN:
-                _withdraw_met(o + 1, later, old, False, status, footprint, rectangle, slot, count, centre, radius,
+                _withdraw_met(o + 1, later, np.array(old), False, status, footprint, rectangle, slot, count, centre, radius,
                               grid_arrays(grid), margin)
             if state != EVENT_LIMIT:
                 _withdraw_met(o + 1, later, footprint[o], False, status, footprint, rectangle, slot, count, centre,
@@ -247,7 +246,7 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
     return grid.memory  # the arrays themselves: borrowed views never go back to Python
 
 
-@jit
+@jit(inline="always")  # a call would reference-count its dozen arrays and bundles, per particle
 def _settle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation,
             particle_drop_xy, sediment, grid, ell, particle, work, history, settings, events, trace, buf, periodic,
             given_top):
@@ -284,27 +283,18 @@ def _same_spheres(n, particle, centre, first_slot, geom, igeom):
     return True
 
 
-@jit
+@jit(inline="always")
 def _freeze_row(o, n, particle, n_c, sediment, grid, key, first_slot, first_key, out_com, out_rot, out_contacts,
                 out_sphere, sphere_row, footprint):
     """Row ``o``'s particle of ``n`` spheres at rest joins the local sediment (slots from
     ``first_slot``, keys from ``first_key``) and its results are written."""
-    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_arrays(grid)
     x_low = y_low = math.inf
     x_high = y_high = -math.inf
     for i in range(n):
-        j = first_slot + i
+        key[first_slot + i] = first_key + i
         x = particle.centre[i, 0]
         y = particle.centre[i, 1]
-        wx, wy = wrap_position(geom, igeom, x, y)
-        sediment.centre[j, 0] = wx
-        sediment.centre[j, 1] = wy
-        sediment.centre[j, 2] = particle.centre[i, 2]
-        sediment.radius[j] = particle.radius[i]
-        key[j] = first_key + i
-        grown = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy,
-                                    particle.centre[i, 2], key)
-        head, col_top, hkeys, hval = grown
+        join_sediment(first_slot + i, x, y, particle.centre[i, 2], particle.radius[i], sediment, grid, key)
         for d in range(3):
             out_sphere[sphere_row + i, d] = particle.centre[i, d]
         x_low = min(x_low, x)
@@ -315,18 +305,10 @@ def _freeze_row(o, n, particle, n_c, sediment, grid, key, first_slot, first_key,
     footprint[o, 1] = x_high
     footprint[o, 2] = y_low
     footprint[o, 3] = y_high
-    _keep_grid(grid, head, col_top, hkeys, hval)
     for d in range(3):
         out_com[o, d] = particle.com[d]
     matrix_to_quat(particle.rotation, out_rot[o])
     out_contacts[o] = n_c
-
-
-@jit(inline="always")
-def _keep_grid(grid, head, col_top, hkeys, hval):
-    """Make possibly grown grid arrays the grid's."""
-    geom, igeom, _, _, nxt, _, _, counts = grid_arrays(grid)
-    set_grid_arrays(grid, geom, igeom, head, col_top, nxt, hkeys, hval, counts)
 
 
 @jit

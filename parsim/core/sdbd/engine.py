@@ -80,7 +80,7 @@ from parsim.core.sdbd.contacts import fill_contacts, keep_touching
 from parsim.core.sdbd.cycling import after_move, close_near_obstacles, forget_descents, new_descent_history
 from parsim.core.sdbd.decision import decide
 from parsim.core.sdbd.fall import fall
-from parsim.core.sdbd.grid import empty_grid, grid_insert, wrap_position
+from parsim.core.sdbd.grid import empty_grid, grid_insert, grid_insert_ordered, wrap_position
 from parsim.core.sdbd.overlap import max_overlap
 from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.polygon import GEOM_CONTAINER
@@ -88,6 +88,8 @@ from parsim.core.sdbd.rolling import roll
 from parsim.core.sdbd.rotation import matrix_to_quat
 
 __all__ = ["run_deposition"]
+
+_NO_KEYS = np.zeros(0, dtype=np.int64)  # the serial run inserts every sphere as the newest of its cell
 
 # diag slots
 D_MAX_OVERLAP = 0      # largest overlap seen after a move (debug), units of length
@@ -353,27 +355,32 @@ def _rest_state(n_c, obstacles):
 
 
 @jit(inline="always")
-def _join_sediment(j, x, y, z, r, sediment, grid):
+def join_sediment(j, x, y, z, r, sediment, grid, key):
     """Sphere ``j`` (centre ``x, y, z`` wrapped into a periodic box, radius ``r``) joins the
-    sediment and the grid."""
+    sediment and the grid: the newest of its cell, or with ``key`` (not empty) in the order of
+    the keys (:func:`.grid.grid_insert_ordered`).  Returns its wrapped ``x, y``."""
     geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_arrays(grid)
     wx, wy = wrap_position(geom, igeom, x, y)
     sediment.centre[j, 0] = wx
     sediment.centre[j, 1] = wy
     sediment.centre[j, 2] = z
     sediment.radius[j] = r
-    grown = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy, z)
+    if key.shape[0]:
+        grown = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy, z, key)
+    else:
+        grown = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy, z)
     # the grid's arrays grow with the pile
     if (grown[0].ctypes.data != head.ctypes.data or grown[1].ctypes.data != col_top.ctypes.data
             or grown[2].ctypes.data != hkeys.ctypes.data or grown[3].ctypes.data != hval.ctypes.data):
         set_grid_arrays(grid, geom, igeom, grown[0], grown[1], nxt, grown[2], grown[3], counts)
+    return wx, wy
 
 
 @jit(inline="always")
 def _lay_substrate(centre, radius, sediment, grid):
     """The substrate's spheres are the first sediment spheres; returns their number."""
     for j in range(radius.shape[0]):
-        _join_sediment(j, centre[j, 0], centre[j, 1], centre[j, 2], radius[j], sediment, grid)
+        join_sediment(j, centre[j, 0], centre[j, 1], centre[j, 2], radius[j], sediment, grid, _NO_KEYS)
     return radius.shape[0]
 
 
@@ -386,7 +393,7 @@ def _freeze(p, n, particle, n_c, state, sediment, grid, n_sed, n_sub, record):
     rad = particle.radius
     for i in range(n):
         record.particle[n_sed - n_sub] = p
-        _join_sediment(n_sed, pos[i, 0], pos[i, 1], pos[i, 2], rad[i], sediment, grid)
+        join_sediment(n_sed, pos[i, 0], pos[i, 1], pos[i, 2], rad[i], sediment, grid, _NO_KEYS)
         n_sed += 1
     for k in range(3):
         record.com[p, k] = particle.com[k]

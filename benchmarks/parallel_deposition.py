@@ -1,0 +1,142 @@
+"""One sediment of monodisperse spheres spread over MPI ranks (``deposit_decomposed``): time, counts
+and a model of the speedup on more cores.
+
+Run it under ``mpiexec``; every rank builds the same inputs (``--spheres`` spheres of diameter 1
+dropped at random over a periodic box of ``--box`` x ``--box`` diameters, FLOOR_ROLL), compiles
+the kernels on a small sediment first, then deposits the big one.  Rank 0 prints one row:
+
+* ``seconds``: the decomposed deposition, wall clock (slowest rank);
+* ``serial s`` and ``speedup``: the serial ``deposit`` of the same inputs, measured on one rank
+  (``mpiexec -n 1``: its row's speedup is the decomposition's overhead alone), or given with
+  ``--serial-seconds`` to the runs on more ranks;
+* ``settled twice``: descents beyond one per particle, over the particles (work thrown away);
+* ``rounds``, and per particle ``bytes`` sent to other ranks (footprints and committed spheres) and
+  ``messages`` (two all-to-alls and one reduction per round: ``2 (K - 1) + log2 K`` per rank);
+* ``MB/rank``: the largest peak resident memory of a rank during the deposition, above what it held
+  before (the inputs, 72 bytes per particle on every rank, included before);
+* ``settle``: the share of the slowest rank's time spent settling particles; the rest is waiting
+  and communicating.
+
+With ``--model``, rank 0 also measures the MPI latency and bandwidth of this machine (a ping-pong
+between ranks 0 and 1) and projects the speedup on ``K`` cores of one node from the counts:
+``T(K) = N t (1 + twice) / K + rounds (3 latency log2(2K) + python) + bytes / bandwidth``, with ``t``
+the serial seconds per particle and ``python`` the measured seconds per round outside the kernels.
+
+    mpiexec -n 1 python benchmarks/parallel_deposition.py --spheres 1000000
+    mpiexec -n 2 python benchmarks/parallel_deposition.py --spheres 1000000 --serial-seconds S --model
+    mpiexec -n 8 python benchmarks/parallel_deposition.py --spheres 100000   # counts only (oversubscribed)
+"""
+
+import argparse
+import math
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+from parsim.core import sdbd
+from parsim.core.shapes import random_rotations, sphere
+from parsim.parallel.deposition import deposit_decomposed
+
+
+def inputs(n, box, seed=1):
+    rng = np.random.default_rng(seed)
+    offsets, radii = sphere()
+    return (0.5 * offsets, 0.5 * radii, np.array([0, 1]), np.zeros(n, dtype=np.int64), np.ones(n),
+            random_rotations(n, rng), rng.random((n, 2)) * box, (0.0, 0.0), (box, box), sdbd.LATERAL_PERIODIC,
+            sdbd.FLOOR_ROLL)
+
+
+def peak_resident_mb():
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def reset_peak():
+    with open("/proc/self/clear_refs", "w") as refs:
+        refs.write("5")
+
+
+def resident_mb():
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def ping_pong(comm, size, repeats=200):
+    """Seconds for one message of ``size`` bytes between ranks 0 and 1 (half a round trip)."""
+    data = np.zeros(max(size, 1), dtype=np.uint8)
+    comm.Barrier()
+    start = time.perf_counter()
+    for _ in range(repeats):
+        if comm.rank == 0:
+            comm.Send(data, dest=1)
+            comm.Recv(data, source=1)
+        elif comm.rank == 1:
+            comm.Recv(data, source=0)
+            comm.Send(data, dest=0)
+    return (time.perf_counter() - start) / (2 * repeats)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--spheres", type=int, default=1_000_000)
+    parser.add_argument("--box", type=float, default=300.0)
+    parser.add_argument("--serial-seconds", type=float, default=None)
+    parser.add_argument("--model", action="store_true")
+    parser.add_argument("--window", type=int, default=None, help="drop indices per rank in a round")
+    options = parser.parse_args()
+    comm = MPI.COMM_WORLD
+    ranks = comm.Get_size()
+    deposit_decomposed(comm, *inputs(2000, 40.0, seed=2))  # compile
+    args = inputs(options.spheres, options.box)
+    comm.Barrier()
+    reset_peak()
+    before = resident_mb()
+    start = time.perf_counter()
+    share = deposit_decomposed(comm, *args, **({} if options.window is None else
+                                                {"window_per_rank": options.window}))
+    seconds = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+    memory = comm.allreduce(peak_resident_mb() - before, op=MPI.MAX)
+    tallies = comm.gather(share.tally)
+    serial = options.serial_seconds
+    if ranks == 1 and serial is None:
+        sdbd.deposit(*inputs(2000, 40.0, seed=2))  # compile
+        start = time.perf_counter()
+        sdbd.deposit(*args)
+        serial = time.perf_counter() - start
+    if comm.rank == 0:
+        n = options.spheres
+        settles = sum(t["settles"] for t in tallies)
+        rounds = tallies[0]["rounds"]
+        sent = sum(t["halo_bytes"] + t["footprint_bytes"] for t in tallies)
+        messages = rounds * (2 * (ranks - 1) + math.ceil(math.log2(ranks))) * ranks if ranks > 1 else 0
+        slowest = max(tallies, key=lambda t: t["settle_seconds"])
+        print(f"{'ranks':>5} {'spheres':>9} {'seconds':>8} {'serial s':>8} {'speedup':>7} {'settled twice':>13} "
+              f"{'rounds':>6} {'bytes/p':>7} {'msgs/p':>6} {'MB/rank':>7} {'settle':>6}")
+        print(f"{ranks:>5} {n:>9} {seconds:>8.2f} {serial if serial else float('nan'):>8.2f} "
+              f"{(serial / seconds) if serial else float('nan'):>7.2f} {settles / n - 1:>13.2e} {rounds:>6} "
+              f"{sent / n:>7.1f} {messages / n:>6.3f} {memory:>7.0f} {slowest['settle_seconds'] / seconds:>6.2f}",
+              flush=True)
+    if options.model and ranks >= 2:
+        latency = ping_pong(comm, 8)
+        bandwidth = 4_000_000 / ping_pong(comm, 4_000_000, repeats=20)
+        if comm.rank == 0:
+            t_particle = serial / n
+            python = (seconds - slowest["settle_seconds"]) / rounds
+            twice = settles / n - 1
+            print(f"latency {latency * 1e6:.1f} us, bandwidth {bandwidth / 1e9:.2f} GB/s, "
+                  f"{python * 1e3:.2f} ms per round outside the kernels")
+            for cores in (2, 4, 8, 16):
+                modelled = (n * t_particle * (1 + twice) / cores + rounds * (3 * latency * math.log2(2 * cores)
+                                                                            + python) + sent / bandwidth)
+                print(f"model: {cores:>2} cores, {modelled:8.2f} s, speedup {serial / modelled:5.2f}")
+
+
+if __name__ == "__main__":
+    main()
