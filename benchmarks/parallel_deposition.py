@@ -47,10 +47,11 @@ def inputs(n, box, seed=1):
             sdbd.FLOOR_ROLL)
 
 
-def peak_resident_mb():
+def status_mb(field):
+    """A memory field of /proc/self/status (``VmRSS``, ``VmHWM``) in MB."""
     with open("/proc/self/status") as status:
         for line in status:
-            if line.startswith("VmHWM:"):
+            if line.startswith(field + ":"):
                 return int(line.split()[1]) / 1024.0
     return float("nan")
 
@@ -58,14 +59,6 @@ def peak_resident_mb():
 def reset_peak():
     with open("/proc/self/clear_refs", "w") as refs:
         refs.write("5")
-
-
-def resident_mb():
-    with open("/proc/self/status") as status:
-        for line in status:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    return float("nan")
 
 
 def ping_pong(comm, size, repeats=200):
@@ -97,12 +90,12 @@ def main():
     args = inputs(options.spheres, options.box)
     comm.Barrier()
     reset_peak()
-    before = resident_mb()
+    before = status_mb("VmRSS")
     start = time.perf_counter()
     share = deposit_decomposed(comm, *args, **({} if options.window is None else
                                                 {"window_per_rank": options.window}))
     seconds = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
-    memory = comm.allreduce(peak_resident_mb() - before, op=MPI.MAX)
+    memory = comm.allreduce(status_mb("VmHWM") - before, op=MPI.MAX)
     tallies = comm.gather(share.tally)
     serial = options.serial_seconds
     if ranks == 1 and serial is None:

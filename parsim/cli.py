@@ -80,8 +80,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--ranks-per-task", type=int, default=1, metavar="K",
                      help="run each task on a group of K ranks (a divisor of the number of ranks; default 1): "
-                          "time-stepping aggregation tasks are decomposed over the group, other tasks run on "
-                          "the group's first rank while the others wait")
+                          "time-stepping aggregation and deposition tasks are decomposed over the group, "
+                          "event-driven aggregation tasks run on the group's first rank while the others wait")
     run.add_argument("--time-limit", type=_duration, metavar="[D-]HH:MM:SS",
                      help="stop handing out tasks in time for the tasks under way to end and the (partial) dataset "
                           "to be written before this much time has passed, e.g. a batch job's limit minus a margin; "

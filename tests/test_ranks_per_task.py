@@ -38,6 +38,17 @@ box_length = 6.0
 packing_samples = 1000
 """
 
+SPLIT_DEPOSITION_JOB = """
+name = "groups_split_deposition"
+kind = "deposition"
+seed = 4
+realizations = 1
+[parameters]
+n_particles = 500
+box_length = 24.0  # two blocks of 12 diameters, wider than the halo of 10: the sediment is split
+packing_samples = 1000
+"""
+
 TS_JOB = """
 name = "groups_ts"
 kind = "aggregation"
@@ -131,10 +142,22 @@ def test_ed_job_on_groups_of_two_is_the_one_rank_job(tmp_path):
 
 
 @pytest.mark.mpi
-def test_deposition_runs_on_the_group_leader(tmp_path):
+def test_a_deposition_too_narrow_to_split_runs_on_the_group_leader(tmp_path):
     two, one = run_grouped_and_serial(tmp_path, DEPOSITION_JOB, ranks=2, ranks_per_task=2)
     xr.testing.assert_identical(reproducible_part(one / "groups_deposition.nc"),
                                 reproducible_part(two / "groups_deposition.nc"))
+
+
+@pytest.mark.mpi
+def test_a_deposition_split_over_a_group_is_the_one_rank_job(tmp_path):
+    two, one = run_grouped_and_serial(tmp_path, SPLIT_DEPOSITION_JOB, ranks=2, ranks_per_task=2)
+    xr.testing.assert_identical(reproducible_part(one / "groups_split_deposition.nc"),
+                                reproducible_part(two / "groups_split_deposition.nc"))
+    for path in (one / "tasks").glob("*.h5"):
+        one_arrays, two_arrays = snapshot_arrays(path), snapshot_arrays(two / "tasks" / path.name)
+        assert one_arrays.keys() == two_arrays.keys()
+        for name, array in one_arrays.items():
+            np.testing.assert_array_equal(array, two_arrays[name], err_msg=name)
 
 
 @pytest.mark.mpi

@@ -138,6 +138,7 @@ class DecomposedDeposition:
     positions: np.ndarray
     radii: np.ndarray
     stopped_at: int
+    clocked_seconds: float
     tally: dict
 
     def gather(self, comm, root=0):
@@ -160,20 +161,22 @@ class DecomposedDeposition:
             particle=np.repeat(index[order], ordered), center_of_mass=joined("center_of_mass")[order],
             rotation=joined("rotation")[order], contacts=joined("contacts")[order], state=joined("state")[order],
             event_counts=joined("event_counts")[order], steps=joined("steps")[order], stopped_at=self.stopped_at,
-            clocked_seconds=float("nan"))
+            clocked_seconds=self.clocked_seconds)
 
 
 def deposit_decomposed(comm, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                        particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
                        trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
-                       wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX, cylinder=None,
-                       substrate_positions=None, substrate_radii=None, halo=None,
+                       clock_from_particle=-1, wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX,
+                       cylinder=None, substrate_positions=None, substrate_radii=None, halo=None,
                        window_per_rank=WINDOW_PER_RANK, check=False) -> DecomposedDeposition:
     """:func:`parsim.core.sdbd.deposit` spread over the ranks of ``comm`` (collective; every rank
     passes the same arguments): each rank returns its share, whose :meth:`~DecomposedDeposition.gather`
     is bitwise the serial result.  ``halo`` is how far a rank's region reaches beyond its block
     (default :func:`default_halo`); a box whose blocks would be narrower than the halo is settled
     whole by rank 0.  ``window_per_rank`` sets the drop indices of a round (that many per rank).
+    ``clocked_seconds`` (of the gathered result) is the wall-clock time from the round in which
+    particle ``clock_from_particle`` was committed to the end (NaN when it is -1).
     With ``check``, every particle's owner fingerprints the sediment its descent read when it settles
     it and again when it commits it, and raises :class:`DecompositionError` if they differ."""
     try:
@@ -192,7 +195,8 @@ def deposit_decomposed(comm, shape_offsets, shape_radii, shape_start, particle_s
         if layout.length / layout.n_blocks < halo:  # blocks narrower than the halo: the task runs whole
             layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.particle_drop_xy[:, 0], 1,
                                  halo)
-        return _RankRun(comm, prep, layout, max(1, int(window_per_rank)) * layout.n_blocks, check).run()
+        return _RankRun(comm, prep, layout, max(1, int(window_per_rank)) * layout.n_blocks, check,
+                        int(clock_from_particle)).run()
     except BaseException as error:
         abort_if_alone(comm, error)  # the other ranks would wait in a collective: end them all, with one line
         raise
@@ -201,7 +205,7 @@ def deposit_decomposed(comm, shape_offsets, shape_radii, shape_start, particle_s
 class _RankRun:
     """The rounds of :func:`deposit_decomposed` on one rank (see the module docs)."""
 
-    def __init__(self, comm, prep, layout, window, check):
+    def __init__(self, comm, prep, layout, window, check, clock_from):
         self.comm = comm
         self.rank = comm.Get_rank()
         self.prep = prep
@@ -237,6 +241,7 @@ class _RankRun:
         self.settled_end = 0
         self.fetched = set()
         self.column_sides = {}
+        self.clock_from = clock_from
         self.tally = {"rounds": 0, "settles": np.zeros(1, dtype=np.int64), "conflicts": 0, "fetches": 0,
                       "halo_particles": 0, "halo_bytes": 0, "footprint_bytes": 0, "settle_seconds": 0.0}
         self._lay_substrate(n_sub)
@@ -322,6 +327,7 @@ class _RankRun:
         n_particles = len(self.prep.particle_shape)
         frontier = 0
         stopped_at = -1
+        clock_start = None
         while frontier < n_particles and stopped_at < 0:
             self.tally["rounds"] += 1
             self._set_cell(self.prep.first_cell if frontier == 0 else self.cells[frontier - 1])
@@ -352,8 +358,11 @@ class _RankRun:
                     self._commit(committed_end, np.searchsorted(self.index, new_frontier))
             else:  # FAIL_STOPPED: the serial run stops at this particle too
                 stopped_at = new_frontier
+            if clock_start is None and 0 <= self.clock_from < new_frontier:
+                clock_start = started
             frontier = new_frontier
-        return self._share(stopped_at)
+        clocked = time.perf_counter() - clock_start if clock_start is not None else float("nan")
+        return self._share(stopped_at, clocked)
 
     def _column_side(self, cell):
         if cell not in self.column_sides:
@@ -527,7 +536,7 @@ class _RankRun:
         spheres = np.repeat(new, counts)
         return counts[new], footprints[new], keys[spheres], centres[spheres], radii[spheres]
 
-    def _share(self, stopped_at) -> DecomposedDeposition:
+    def _share(self, stopped_at, clocked_seconds) -> DecomposedDeposition:
         done = len(self.prep.particle_shape) if stopped_at < 0 else stopped_at
         rows = np.flatnonzero((self.status == FINAL) & (self.index < done))
         spheres = _spans(self.sphere_row[rows], self.count[rows])
@@ -536,7 +545,7 @@ class _RankRun:
                      chunk_steps=int(self.chunks[rows].sum()))
         return DecomposedDeposition(self.index[rows], self.com[rows], self.rot[rows], self.contacts[rows],
                                     self.state[rows], self.events[rows], self.steps[rows], self.count[rows],
-                                    self.spheres[spheres], self.radius[slots], stopped_at, tally)
+                                    self.spheres[spheres], self.radius[slots], stopped_at, clocked_seconds, tally)
 
 
 def _box_within(box, extent, length, periodic):

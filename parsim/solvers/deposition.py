@@ -8,9 +8,9 @@ sections 3 and 4, in a periodic or walled box, a cylinder or on an open floor, o
 floor or a fixed substrate; then the sediment's statistics are measured
 (:mod:`.deposition_statistics`).
 
-The algorithm is sequential and not decomposable: with ``parsim run
---ranks-per-task K > 1`` a task runs on its group's rank 0 while the other ranks
-of the group wait.
+With ``parsim run --ranks-per-task K > 1`` a task's sediment is spread over its group's K ranks
+(:mod:`parsim.parallel.deposition`), bitwise the serial sediment, and assembled on the group's rank
+0, which measures its statistics and writes it.
 """
 
 import math
@@ -463,8 +463,9 @@ def _spheres_of(params: dict, entry: dict) -> int:
             "cube": size**3 - max(size - 2, 0) ** 3}[shape]
 
 
-def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
-    """One task; serial, so ``comm`` (a group of one, see :class:`parsim.solver.Solver`) is not used."""
+def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult | None:
+    """One task on the ranks of ``comm`` (:func:`parsim.parallel.deposition.deposit_decomposed` on
+    several); the result is on its rank 0, the other ranks return None."""
     species = species_of(params)
     n = params["n_particles"]
     # sizes, orientations and drop points each from their own stream, the species from a fourth:
@@ -479,14 +480,23 @@ def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
     substrate = substrate_spheres(params)
     skip = int(params["timing_skip_fraction"] * n)
     start = np.cumsum([0, *(len(s.radii) for s in species)])
-    result = sdbd.deposit(np.concatenate([s.offsets for s in species]), np.concatenate([s.radii for s in species]),
-                          start, drops.species, drops.scale, rotation, drop_xy, geometry.lower, geometry.upper,
-                          geometry.lateral, FLOOR[params["floor"]], wall_contact=WALL_CONTACTS[params["wall_contact"]],
-                          trial_angle=params["trial_angle"], cycle_n=params["cycle_n"], cycle_eps=params["cycle_eps"],
-                          max_events_per_particle=params["max_events_per_particle"],
-                          clock_from_particle=skip if skip < n else -1, container=geometry.container,
-                          cylinder=geometry.cylinder, substrate_positions=substrate[0] if len(substrate[1]) else None,
-                          substrate_radii=substrate[1] if len(substrate[1]) else None)
+    arguments = (np.concatenate([s.offsets for s in species]), np.concatenate([s.radii for s in species]), start,
+                 drops.species, drops.scale, rotation, drop_xy, geometry.lower, geometry.upper, geometry.lateral,
+                 FLOOR[params["floor"]])
+    options = dict(wall_contact=WALL_CONTACTS[params["wall_contact"]], trial_angle=params["trial_angle"],
+                   cycle_n=params["cycle_n"], cycle_eps=params["cycle_eps"],
+                   max_events_per_particle=params["max_events_per_particle"],
+                   clock_from_particle=skip if skip < n else -1, container=geometry.container,
+                   cylinder=geometry.cylinder, substrate_positions=substrate[0] if len(substrate[1]) else None,
+                   substrate_radii=substrate[1] if len(substrate[1]) else None)
+    if comm.Get_size() > 1:  # one sediment on the group's ranks, bitwise the serial one, assembled on its rank 0
+        from parsim.parallel.deposition import deposit_decomposed
+
+        result = deposit_decomposed(comm, *arguments, **options).gather(comm)
+        if result is None:
+            return None
+    else:
+        result = sdbd.deposit(*arguments, **options)
     if result.stopped_at >= 0:
         raise NumericalError(f"particle {result.stopped_at} (of {n}) needed more than max_events_per_particle = "
                              f"{params['max_events_per_particle']} events; raise the limit or check the shape")
@@ -573,4 +583,5 @@ def _configuration(params, geometry, result, species, drops, substrate) -> Confi
 SOLVER = Solver(kind="deposition", description="steepest descent ballistic deposition of multi-sphere particles "
                 "(Topic & Poeschel 2016)", parameters=PARAMETERS, statistics=statistics.STATISTICS,
                 coordinates=statistics.coordinates, check=check, cost=cost, memory=memory, memory_keys=memory_keys,
-                warm_up_parameters=warm_up_parameters, solve=solve, tables=(SPECIES_TABLE, LAYERS_TABLE))
+                warm_up_parameters=warm_up_parameters, solve=solve, decomposable=True,
+                tables=(SPECIES_TABLE, LAYERS_TABLE))
