@@ -1,5 +1,7 @@
 """`parsim run --ranks-per-task K`: each task on a group of K ranks, the same dataset as on one rank."""
 
+import subprocess
+import sys
 import time
 
 import h5py
@@ -11,7 +13,7 @@ from mpi4py import MPI
 from parsim.job import parse_job
 from parsim.solvers import SOLVERS
 from tests.datasets import reproducible_part, run_serial, snapshot_arrays
-from tests.mpi import parsim_command, run_mpi
+from tests.mpi import kill_session, mpiexec, parsim_command, run_mpi
 
 PROBE = "tests/scripts/group_probe.py"
 
@@ -158,6 +160,26 @@ def test_a_deposition_split_over_a_group_is_the_one_rank_job(tmp_path):
         assert one_arrays.keys() == two_arrays.keys()
         for name, array in one_arrays.items():
             np.testing.assert_array_equal(array, two_arrays[name], err_msg=name)
+
+
+@pytest.mark.mpi
+def test_a_split_deposition_killed_mid_job_resumes_to_the_same_dataset(tmp_path):
+    job = write_job(tmp_path, SPLIT_DEPOSITION_JOB.replace("realizations = 1", "realizations = 6")
+                    .replace("n_particles = 500", "n_particles = 3000"))
+    out = tmp_path / "grouped"
+    arguments = parsim_command("run", job, "--output", str(out), "--quiet", "--ranks-per-task", "2")
+    process = subprocess.Popen([mpiexec(), "-n", "2", sys.executable, *arguments], start_new_session=True,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while not list((out / "tasks").glob("*.h5")) and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.01)
+    kill_session(process)  # mpiexec and both ranks, in the middle of a split task or between two
+    assert 1 <= len(list((out / "tasks").glob("*.h5"))) < 6, "the kill should land in the middle of the job"
+    assert run_on_groups(job, out, ranks=2, ranks_per_task=2).returncode == 0
+    one = run_serial("run", job, "--output", str(tmp_path / "one"), "--quiet")
+    assert one.returncode == 0, one.stderr
+    xr.testing.assert_identical(reproducible_part(tmp_path / "one" / "groups_split_deposition.nc"),
+                                reproducible_part(out / "groups_split_deposition.nc"))
 
 
 @pytest.mark.mpi

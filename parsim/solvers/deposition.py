@@ -489,7 +489,7 @@ def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult | None:
                    clock_from_particle=skip if skip < n else -1, container=geometry.container,
                    cylinder=geometry.cylinder, substrate_positions=substrate[0] if len(substrate[1]) else None,
                    substrate_radii=substrate[1] if len(substrate[1]) else None)
-    if comm.Get_size() > 1:  # one sediment on the group's ranks, bitwise the serial one, assembled on its rank 0
+    if comm is not None and comm.Get_size() > 1:  # bitwise the serial sediment, assembled on the group's rank 0
         from parsim.parallel.deposition import deposit_decomposed
 
         result = deposit_decomposed(comm, *arguments, **options).gather(comm)

@@ -47,8 +47,8 @@ from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.rotation import matrix_to_quat
 
 __all__ = ["ABSENT", "PRESENT", "STOPPED", "FINAL", "WITHDRAWN", "settle_rows", "first_failure", "insert_committed",
-           "withdraw", "grid_with_cell", "lay_substrate", "read_signature", "first_changed", "drop_top", "rows_meeting", "rows_with_centre_in", "box_meets",
-           "interval_within"]
+           "withdraw", "grid_with_cell", "lay_substrate", "read_signature", "first_changed", "drop_top",
+           "rows_meeting", "rows_with_centre_in", "box_meets", "interval_within"]
 
 ABSENT, PRESENT, STOPPED, FINAL, WITHDRAWN = 0, 1, 2, 3, 4
 #: why a row cannot be committed (:func:`first_failure`), in the order they are examined
@@ -237,8 +237,8 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
         # later rows settled while this one was elsewhere or absent read what changed
         if moved and later > o + 1:
             if was == WITHDRAWN:
-                _withdraw_met(o + 1, later, np.array(old), False, status, footprint, rectangle, slot, count, centre, radius,
-                              grid_arrays(grid), margin)
+                _withdraw_met(o + 1, later, np.array(old), False, status, footprint, rectangle, slot, count, centre,
+                              radius, grid_arrays(grid), margin)
             if state != EVENT_LIMIT:
                 _withdraw_met(o + 1, later, footprint[o], False, status, footprint, rectangle, slot, count, centre,
                               radius, grid_arrays(grid), margin)
