@@ -83,6 +83,7 @@ def main():
     parser.add_argument("--serial-seconds", type=float, default=None)
     parser.add_argument("--model", action="store_true")
     parser.add_argument("--window", type=int, default=None, help="drop indices per rank in a round")
+    parser.add_argument("--halo", type=float, default=None, help="halo in diameters (default: deposit_decomposed's)")
     options = parser.parse_args()
     comm = MPI.COMM_WORLD
     ranks = comm.Get_size()
@@ -92,8 +93,8 @@ def main():
     reset_peak()
     before = status_mb("VmRSS")
     start = time.perf_counter()
-    share = deposit_decomposed(comm, *args, **({} if options.window is None else
-                                                {"window_per_rank": options.window}))
+    tuning = {"window_per_rank": options.window, "halo": options.halo}
+    share = deposit_decomposed(comm, *args, **{key: value for key, value in tuning.items() if value is not None})
     seconds = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     memory = comm.allreduce(status_mb("VmHWM") - before, op=MPI.MAX)
     tallies = comm.gather(share.tally)

@@ -47,7 +47,7 @@ seed = 4
 realizations = 1
 [parameters]
 n_particles = 500
-box_length = 24.0  # two blocks of 12 diameters, wider than the halo of 10: the sediment is split
+box_length = 24.0  # two blocks of 12 diameters, wider than the halo of 5: the sediment is split
 packing_samples = 1000
 """
 
