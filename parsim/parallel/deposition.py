@@ -67,7 +67,7 @@ def default_halo(prep) -> float:
     """The halo (how far a region reaches beyond its block) for a deposition: four columns and twice
     the largest particle extent, 5 diameters for spheres, wider than what nearly every particle's
     descent reads beyond its drop point in a box (a heap's particles roll farther; their owners
-    fetch what they miss).  On 2 ranks it was the fastest of 3 to 9 diameters (benchmarks)."""
+    fetch what they miss).  On 2 ranks it was the fastest of 3 to 9 diameters (docs/benchmarks.md)."""
     extent = 0.0
     for s in range(len(prep.shape_start) - 1):
         a, b = prep.shape_start[s], prep.shape_start[s + 1]
