@@ -131,18 +131,12 @@ def _withdraw_met(first, last, box, by_footprint, status, footprint, rectangle, 
 
 
 @jit
-def regrid_by_key(grid, cell, centre, radius, key):
-    """Build the grid anew with cell ``cell`` over the slots in the sediment (radius > 0), inserted
-    in increasing key: every list as the serial run's."""
+def grid_with_cell(grid_state, cell, centre, radius, key):
+    """The grid's arrays, rebuilt with cell ``cell`` over the slots in the sediment (radius > 0),
+    inserted in increasing key: every list as the serial run's."""
+    grid = new_grid(*grid_state)
     used = np.flatnonzero(radius > 0.0)
     regrid(grid, cell, centre, used[np.argsort(key[used], kind="mergesort")])
-
-
-@jit
-def grid_with_cell(grid_state, cell, centre, radius, key):
-    """The grid's arrays, rebuilt with cell ``cell`` (:func:`regrid_by_key`)."""
-    grid = new_grid(*grid_state)
-    regrid_by_key(grid, cell, centre, radius, key)
     return grid.memory  # the arrays themselves: borrowed views never go back to Python
 
 
@@ -340,24 +334,19 @@ def first_failure(first, last, index, status, rectangle, region, other_index, ot
 @jit
 def lay_substrate(positions, radii, region, centre, radius, key, grid_state):
     """The substrate's spheres (keys ``0 .. m - 1``) whose wrapped centre lies in the ``region``
-    (x_low, x_high) join the empty local sediment, as the serial run lays them.  Returns their
-    number and the grid's arrays."""
-    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
-    periodic = igeom[0] == LATERAL_PERIODIC
+    (x_low, x_high) join the empty local sediment, as the serial run lays them
+    (:func:`.engine.join_sediment`).  Returns their number and the grid's arrays."""
+    grid = new_grid(*grid_state)
+    sediment = sediment_in(centre, radius)
+    periodic = grid.igeom[0] == LATERAL_PERIODIC
     n = 0
     for j in range(radii.shape[0]):
-        wx, wy = wrap_position(geom, igeom, positions[j, 0], positions[j, 1])
-        if not interval_within(wx, wx, region[0], region[1], geom[2], periodic):
-            continue
-        centre[n, 0] = wx
-        centre[n, 1] = wy
-        centre[n, 2] = positions[j, 2]
-        radius[n] = radii[j]
-        key[n] = j
-        head, col_top, hkeys, hval = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts, n,
-                                                         wx, wy, positions[j, 2], key)
-        n += 1
-    return n, (geom, igeom, head, col_top, nxt, hkeys, hval, counts)
+        wx, _ = wrap_position(grid.geom, grid.igeom, positions[j, 0], positions[j, 1])
+        if interval_within(wx, wx, region[0], region[1], grid.geom[2], periodic):
+            key[n] = j
+            join_sediment(n, positions[j, 0], positions[j, 1], positions[j, 2], radii[j], sediment, grid, key)
+            n += 1
+    return n, grid.memory  # the arrays themselves: borrowed views never go back to Python
 
 
 @jit

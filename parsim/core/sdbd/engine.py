@@ -168,8 +168,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
         started = counters.start(tallies)
         reads.forget(work.reads)
         n, _ = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                          particle_rotation, particle_drop_xy, sediment, grid, ell, particle, work.reads,
-                             math.nan)
+                             particle_rotation, particle_drop_xy, sediment, grid, ell, particle, work.reads, math.nan)
         _fit_grid(n, particle, sediment, n_sed, grid)
         counters.stop(tallies, counters.PARTICLE, started)
         state, n_c, steps, chunk_ends, overlap, buf = _descend(
