@@ -1,9 +1,10 @@
-"""One sediment of monodisperse spheres spread over MPI ranks (``deposit_decomposed``): time, counts
-and a model of the speedup on more cores.
+"""One sediment of monodisperse spheres spread over MPI ranks (``deposit_streamed``): time, counts,
+memory and a model of the speedup on more cores.
 
-Run it under ``mpiexec``; every rank builds the same inputs (``--spheres`` spheres of diameter 1
-dropped at random over a periodic box of ``--box`` x ``--box`` diameters, FLOOR_ROLL), compiles
-the kernels on a small sediment first, then deposits the big one.  Rank 0 prints one row:
+Run it under ``mpiexec``; every rank draws the same inputs (``--spheres`` spheres of diameter 1
+dropped at random over a periodic box of ``--box`` x ``--box`` diameters, FLOOR_ROLL) a chunk at a
+time and keeps its own, as ``parsim run --ranks-per-task`` does; it compiles the kernels on a small
+sediment first, then deposits the big one.  Rank 0 prints one row:
 
 * ``seconds``: the decomposed deposition, wall clock (slowest rank);
 * ``serial s`` and ``speedup``: the serial ``deposit`` of the same inputs, measured on one rank
@@ -13,7 +14,7 @@ the kernels on a small sediment first, then deposits the big one.  Rank 0 prints
 * ``rounds``, and per particle ``bytes`` sent to other ranks (footprints and committed spheres) and
   ``messages`` (two all-to-alls and one reduction per round: ``2 (K - 1) + log2 K`` per rank);
 * ``MB/rank``: the largest peak resident memory of a rank during the deposition, above what it held
-  before (the inputs, 72 bytes per particle on every rank, included before);
+  before (its own particles' inputs included; the serial run holds all of them);
 * ``settle``: the share of the slowest rank's time spent settling particles; the rest is waiting
   and communicating.
 
@@ -36,15 +37,39 @@ from mpi4py import MPI
 
 from parsim.core import sdbd
 from parsim.core.shapes import random_rotations, sphere
-from parsim.parallel.deposition import deposit_decomposed
+from parsim.parallel.deposition import deposit_streamed
+
+CHUNK = 1 << 20  # particles drawn at a time
 
 
-def inputs(n, box, seed=1):
-    rng = np.random.default_rng(seed)
+def particle_chunks(n, box, seed=1):
+    """A function yielding the particles' inputs in chunks, from the first particle at every call."""
+
+    def chunks():
+        rotation_rng, drop_rng = np.random.default_rng(seed).spawn(2)
+        for first in range(0, n, CHUNK):
+            count = min(CHUNK, n - first)
+            yield (np.zeros(count, dtype=np.int64), np.ones(count), random_rotations(count, rotation_rng),
+                   drop_rng.random((count, 2)) * box)
+
+    return chunks
+
+
+def shapes_and_box(box):
     offsets, radii = sphere()
-    return (0.5 * offsets, 0.5 * radii, np.array([0, 1]), np.zeros(n, dtype=np.int64), np.ones(n),
-            random_rotations(n, rng), rng.random((n, 2)) * box, (0.0, 0.0), (box, box), sdbd.LATERAL_PERIODIC,
-            sdbd.FLOOR_ROLL)
+    return (0.5 * offsets, 0.5 * radii, np.array([0, 1])), ((0.0, 0.0), (box, box), sdbd.LATERAL_PERIODIC,
+                                                             sdbd.FLOOR_ROLL)
+
+
+def deposit_spread(comm, n, box, seed=1, **options):
+    shapes, container = shapes_and_box(box)
+    return deposit_streamed(comm, *shapes, particle_chunks(n, box, seed), *container, **options)
+
+
+def serial_inputs(n, box, seed=1):
+    """The arguments of ``sdbd.deposit`` for the same particles, all of them at once."""
+    shapes, container = shapes_and_box(box)
+    return (*shapes, *[np.concatenate(column) for column in zip(*particle_chunks(n, box, seed)())], *container)
 
 
 def status_mb(field):
@@ -83,26 +108,27 @@ def main():
     parser.add_argument("--serial-seconds", type=float, default=None)
     parser.add_argument("--model", action="store_true")
     parser.add_argument("--window", type=int, default=None, help="drop indices per rank in a round")
-    parser.add_argument("--halo", type=float, default=None, help="halo in diameters (default: deposit_decomposed's)")
+    parser.add_argument("--halo", type=float, default=None, help="halo in diameters (default: deposit_streamed's)")
     options = parser.parse_args()
     comm = MPI.COMM_WORLD
     ranks = comm.Get_size()
-    deposit_decomposed(comm, *inputs(2000, 40.0, seed=2))  # compile
-    args = inputs(options.spheres, options.box)
+    deposit_spread(comm, 2000, 40.0, seed=2)  # compile
     comm.Barrier()
     reset_peak()
     before = status_mb("VmRSS")
     start = time.perf_counter()
     tuning = {"window_per_rank": options.window, "halo": options.halo}
-    share = deposit_decomposed(comm, *args, **{key: value for key, value in tuning.items() if value is not None})
+    share = deposit_spread(comm, options.spheres, options.box,
+                           **{key: value for key, value in tuning.items() if value is not None})
     seconds = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     memory = comm.allreduce(status_mb("VmHWM") - before, op=MPI.MAX)
     tallies = comm.gather(share.tally)
     serial = options.serial_seconds
     if ranks == 1 and serial is None:
-        sdbd.deposit(*inputs(2000, 40.0, seed=2))  # compile
+        sdbd.deposit(*serial_inputs(2000, 40.0, seed=2))  # compile
+        arguments = serial_inputs(options.spheres, options.box)
         start = time.perf_counter()
-        sdbd.deposit(*args)
+        sdbd.deposit(*arguments)
         serial = time.perf_counter() - start
     if comm.rank == 0:
         n = options.spheres

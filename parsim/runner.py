@@ -131,12 +131,13 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
             group = MPI.COMM_SELF
         task = pending[k]
         result = solve_task(job, task, group)
-        if group.Get_rank() > 0:
-            return
+        if result is None:
+            return  # the task's result is on the group's rank 0
         with writing:
-            if job.keeps_configuration(task):
-                write_task_file(folder.task_path(task), result, task_attributes(job, task))
-            rows.append(task.key, task.realization, result.statistics)
+            if job.keeps_configuration(task):  # every rank of a group whose ranks hold shares of the configuration
+                write_task_file(folder.task_path(task), result, task_attributes(job, task), group)
+            if group.Get_rank() == 0:
+                rows.append(task.key, task.realization, result.statistics)
 
     def describe_failure(k: int, error: Exception) -> str:
         task = pending[k]
@@ -160,14 +161,15 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
 def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult | None:
     """Solve ``task`` of ``job`` on ``comm`` from its own random stream; its ``wall_time`` is the solve's.
 
-    A decomposed task's result lives on ``comm``'s rank 0; the other ranks get None.
+    A decomposed task's result lives on ``comm``'s rank 0, and the other ranks get None, unless its
+    configuration stays spread over the ranks (a deposition's): then each rank gets the statistics and
+    its share.
     """
     solver = job.solver
     start = time.perf_counter()
     result = solver.solve(job.point_parameters(task.point), np.random.default_rng(job.seed_sequence(task)), comm)
-    if comm.Get_rank() > 0:
-        return None
-    result.statistics["wall_time"] = time.perf_counter() - start
+    if result is not None:
+        result.statistics["wall_time"] = time.perf_counter() - start
     return result
 
 

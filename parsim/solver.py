@@ -92,6 +92,11 @@ class Configuration:
 
     ``arrays`` maps HDF5 paths (``"spheres/position"``, ``"links"``, ...) to
     arrays; ``attrs`` are extra root attributes (``floor_z``, ...).
+
+    A configuration spread over the ranks of a task's group is one rank's share:
+    ``rank_rows`` names its arrays that hold this rank's rows only (the others are
+    the same on every rank); its task file joins the ranks' rows
+    (:func:`parsim.output.snapshot.write_task_file`).
     """
 
     arrays: dict[str, np.ndarray]
@@ -99,6 +104,7 @@ class Configuration:
     box_upper: np.ndarray
     periodic: np.ndarray
     attrs: dict[str, Any] = field(default_factory=dict)
+    rank_rows: tuple[str, ...] = ()
 
 
 @dataclass
@@ -145,7 +151,8 @@ class Solver:
     - ``solve(params, rng, comm)``: run one task.  ``comm`` is the task's group of
       ranks (``parsim run --ranks-per-task``; size 1 = serial); every rank of it calls
       ``solve`` with the same arguments, and the result of its rank 0 is the task's
-      (the other ranks may return None);
+      (the other ranks may return None, or the same statistics and their shares of a
+      configuration spread over the ranks, :attr:`Configuration.rank_rows`);
     - ``tables``: the arrays of tables a job of this kind may hold (``[[species]]``); the
       entries reach ``check``, ``cost``, ``memory`` and ``solve`` as ``params[name]``, a tuple
       of dicts holding the keys each entry sets;

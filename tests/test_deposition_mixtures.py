@@ -192,3 +192,53 @@ def test_no_contact_across_opposite_walls():
         contacts = _contacts(positions, np.full(2, 0.5), np.arange(2), region, np.ones(2, dtype=bool))
         assert contacts["bulk_coordination"] == expected
         assert contacts["contact_number_fraction"][int(expected)] == 1.0
+
+
+CHUNKED_JOB = """
+name = "chunked"
+kind = "deposition"
+seed = 4
+realizations = 1
+[parameters]
+n_particles = 1000
+box_length = 30.0
+lateral = "{lateral}"
+[[species]]
+name = "rods"
+shape = "rod"
+shape_size = 3
+size_distribution = "lognormal"
+size_spread = 0.2
+[[species]]
+name = "grains"
+shape = "sphere"
+size_distribution = "uniform"
+size_spread = 0.3
+[[layers]]
+n_particles = 400
+species = "rods"
+[[layers]]
+n_particles = 600
+species = ""
+"""
+
+
+@pytest.mark.parametrize("lateral", ["periodic", "walls", "none"])
+def test_particles_drawn_in_chunks_are_those_drawn_at_once(lateral):
+    """A rank of a task spread over ranks draws the particles a chunk at a time, keeping its own: every
+    chunk, across layers and species, continues the streams exactly where the one draw would."""
+    from parsim.solvers.deposition import _container, _particle_chunks
+    from parsim.solvers.deposition_materials import species_of
+
+    params = parse_job(CHUNKED_JOB.format(lateral=lateral), SOLVERS).point_parameters(0)
+    species = species_of(params)
+    geometry = _container(params, species)
+    (drops, rotation, drop_xy), = _particle_chunks(params, species, geometry, np.random.default_rng(5), 1000)()
+    chunks = _particle_chunks(params, species, geometry, np.random.default_rng(5), 37)
+    for parts in (list(chunks()), list(chunks())):  # every call starts again from the first particle
+        assert len(parts) == 28
+        np.testing.assert_array_equal(drops.species, np.concatenate([part[0].species for part in parts]))
+        np.testing.assert_array_equal(drops.scale, np.concatenate([part[0].scale for part in parts]))
+        np.testing.assert_array_equal(rotation, np.concatenate([part[1] for part in parts]))
+        np.testing.assert_array_equal(drop_xy, np.concatenate([part[2] for part in parts]))
+    assert (drops.species[:400] == 0).all() and 0 < drops.species[400:].sum() < 600

@@ -107,9 +107,13 @@ def nematic_order(axes):
     of n axes has S ~ 1/sqrt(n).
     """
     u = _as_unit_vectors(axes)
-    q = 1.5 * (u.T @ u) / len(u) - 0.5 * np.eye(3)
-    values, vectors = np.linalg.eigh(q)
+    values, vectors = np.linalg.eigh(order_tensor(u.T @ u, len(u)))
     return float(values[-1]), _positive_sign(vectors[:, -1])
+
+
+def order_tensor(second_moment, count):
+    """Q = 3/2 <u ⊗ u> − 1/2 1 of ``count`` unit axes from their second moment, the sum of u ⊗ u."""
+    return 1.5 * np.asarray(second_moment, dtype=np.float64) / count - 0.5 * np.eye(3)
 
 
 def vertical_order(axes):
@@ -218,9 +222,11 @@ def contact_pairs(positions, radii, particle, box_lower_xy, box_upper_xy, period
     return network.pairs, network.normals
 
 
-def contact_network(positions, radii, particle, box_lower_xy, box_upper_xy, periodic):
+def contact_network(positions, radii, particle, box_lower_xy, box_upper_xy, periodic, mean_radius=None):
     """The contacts of :func:`contact_pairs` and, from the same search, the spheres that overlap:
-    :class:`ContactNetwork` (pairs, normals, overlapping).
+    :class:`ContactNetwork` (pairs, normals, overlapping).  The contact tolerance is
+    CONTACT_GAP_TOLERANCE times ``mean_radius`` (default: the mean of ``radii``; a part of a sediment
+    passes the whole sediment's).
 
     ``overlapping`` flags each sphere that overlaps another, of any particle, by more than half the
     overlap tolerance of :mod:`parsim.core.sediment` times the smallest radius,
@@ -238,7 +244,7 @@ def contact_network(positions, radii, particle, box_lower_xy, box_upper_xy, peri
     width = np.asarray(box_upper_xy, dtype=np.float64) - np.asarray(box_lower_xy, dtype=np.float64)
     if periodic and np.any(width < 4.0 * radii.max()):
         raise ValueError(f"periodic box widths {width} must exceed twice the largest diameter")
-    tolerance = CONTACT_GAP_TOLERANCE * float(np.mean(radii))
+    tolerance = CONTACT_GAP_TOLERANCE * float(np.mean(radii) if mean_radius is None else mean_radius)
     overlap_cut = 0.5 * OVERLAP_TOLERANCE * float(radii.min())
     # cells span R_i + R_j + tolerance; layer by layer, the order in which a sediment was deposited, about
     grid = _SphereGrid(x, radii + 0.5 * tolerance, box_lower_xy, box_upper_xy, layers_first=True)

@@ -7,6 +7,13 @@ solver's other arrays (``spheres/velocity``, ``spheres/cluster``, ``links``,
 ``parsim_output_schema``.  The group ``statistics`` holds one dataset per statistic
 of the task, so that a task file describes its task alone; the job's dataset is
 assembled from the row files (:mod:`parsim.output.rows`).
+
+A sediment spread over the ranks of a task's group (``parsim run --ranks-per-task K``) is written
+without gathering it: each rank writes its particles and spheres to ``LABEL.parts/rankNNNN.h5``
+beside the task file, and the task file ``LABEL.h5`` joins them as HDF5 virtual datasets, which
+h5py, netCDF4 and every HDF5 1.10+ reader open as one array (their rows in rank order;
+``particles/index`` holds each particle's place in the drop order).  :func:`read_configuration`
+returns the configuration in the serial order, the same as the one-rank task's.
 """
 
 import io
@@ -17,10 +24,15 @@ import numpy as np
 
 import parsim
 from parsim.errors import JobError, OutputError
-from parsim.output.atomic import write_bytes_atomically
+from parsim.output.atomic import write_bytes_atomically, written_atomically
 from parsim.solver import Configuration, TaskResult
 
 STATISTICS_GROUP = "statistics"
+PARTS_SUFFIX = ".parts"
+PARTICLE_ORDER = "particles/index"
+#: the arrays of each group of a spread configuration, and the array whose stable sort puts them in
+#: the serial order (a particle's spheres are on its rank, one after the other)
+SERIAL_ORDER = {"particles/": PARTICLE_ORDER, "spheres/": "spheres/particle"}
 
 OUTPUT_SCHEMA = 5
 """Version of the layout of the outputs (task files and dataset), recorded in both.
@@ -64,18 +76,30 @@ def check_schema(attrs, subject: str, folder: Path) -> None:
                    f"another output folder (key 'output' or option --output) or after removing {folder}")
 
 
-def write_task_file(path: Path, result: TaskResult, attrs: dict) -> None:
+def write_task_file(path: Path, result: TaskResult, attrs: dict, comm=None) -> None:
     """Write one task's configuration, statistics and ``attrs`` (parameters, seed) atomically.
 
     The HDF5 file is built in memory and then written in one piece, so that a
     full disk raises an :class:`OutputError` naming ``path`` instead of failing
-    inside the HDF5 library.
+    inside the HDF5 library.  A configuration spread over the ranks of ``comm``
+    (:attr:`Configuration.rank_rows`) is written by every rank, collectively: see
+    the module docs.
     """
+    configuration = result.configuration
+    if configuration.rank_rows and comm is not None and comm.Get_size() > 1:
+        _write_joined_task_file(path, result, attrs, comm)
+        return
+    write_bytes_atomically(path, _task_image(result, attrs, lambda file, name, array: file.create_dataset(
+        name, data=np.asarray(array))))
+
+
+def _task_image(result: TaskResult, attrs: dict, write_array) -> memoryview:
+    """The task file in memory; ``write_array(file, name, array)`` writes each configuration array."""
     configuration = result.configuration
     image = io.BytesIO()
     with h5py.File(image, "w") as file:
         for name, array in configuration.arrays.items():
-            file.create_dataset(name, data=np.asarray(array))
+            write_array(file, name, array)
         file.attrs["box_lower"] = np.asarray(configuration.box_lower, dtype=np.float64)
         file.attrs["box_upper"] = np.asarray(configuration.box_upper, dtype=np.float64)
         file.attrs["periodic"] = np.asarray(configuration.periodic, dtype=bool)
@@ -85,7 +109,57 @@ def write_task_file(path: Path, result: TaskResult, attrs: dict) -> None:
         group = file.create_group(STATISTICS_GROUP)
         for name, value in result.statistics.items():
             group.create_dataset(name, data=np.asarray(value))
-    write_bytes_atomically(path, image.getbuffer())
+    return image.getbuffer()
+
+
+def parts_folder(path: Path) -> Path:
+    """The folder of the ranks' files of the task file ``path`` of a spread configuration."""
+    return Path(path).with_suffix(PARTS_SUFFIX)
+
+
+def _part_name(rank: int) -> str:
+    return f"rank{rank:04d}.h5"
+
+
+def _write_joined_task_file(path: Path, result: TaskResult, attrs: dict, comm) -> None:
+    """Every rank writes its rows to its part file; the group's rank 0 then writes the task file, whose
+    arrays of rows are virtual datasets over the parts (in rank order).  Collective over ``comm``."""
+    configuration = result.configuration
+    folder = parts_folder(path)
+    rows = {name: np.asarray(configuration.arrays[name]) for name in configuration.rank_rows}
+    with written_atomically(folder / _part_name(comm.Get_rank())) as temporary:
+        folder.mkdir(exist_ok=True)
+        with h5py.File(temporary, "w") as file:  # large: written in place, an OSError names the part
+            for name, array in rows.items():
+                file.create_dataset(name, data=array)
+    layouts = comm.gather({name: (array.shape, array.dtype.str) for name, array in rows.items()}, root=0)
+    if comm.Get_rank() != 0:
+        return
+    for stale in folder.glob(f"rank*{Path(_part_name(0)).suffix}"):  # of an earlier run on more ranks
+        if stale.name not in {_part_name(rank) for rank in range(len(layouts))}:
+            stale.unlink(missing_ok=True)
+
+    def write_array(file, name, array):
+        if name in rows:
+            file.create_virtual_dataset(name, _joined_layout(name, layouts, folder.name))
+        else:
+            file.create_dataset(name, data=np.asarray(array))
+
+    write_bytes_atomically(path, _task_image(result, attrs, write_array))
+
+
+def _joined_layout(name: str, layouts: list[dict], folder_name: str) -> h5py.VirtualLayout:
+    """The virtual layout of array ``name``: the parts' rows one after the other, in rank order; the
+    sources are named relative to the task file, so that the output folder can move."""
+    shapes = [layout[name][0] for layout in layouts]
+    total = sum(shape[0] for shape in shapes)
+    joined = h5py.VirtualLayout(shape=(total, *shapes[0][1:]), dtype=np.dtype(layouts[0][name][1]))
+    first = 0
+    for rank, shape in enumerate(shapes):
+        if shape[0]:
+            joined[first:first + shape[0]] = h5py.VirtualSource(f"{folder_name}/{_part_name(rank)}", name, shape=shape)
+            first += shape[0]
+    return joined
 
 
 def read_schema_attributes(path: Path) -> dict:
@@ -101,11 +175,37 @@ def read_schema_attributes(path: Path) -> dict:
 
 
 def read_configuration(path: Path) -> Configuration:
-    """The configuration of a task file, with every array of the snapshot."""
+    """The configuration of a task file, with every array of the snapshot; a spread configuration's
+    in the serial order (:data:`SERIAL_ORDER`)."""
     arrays = {}
     with h5py.File(path, "r") as file:
-        file.visititems(lambda name, item: arrays.__setitem__(name, item[()])
+        file.visititems(lambda name, item: arrays.__setitem__(name, _read_array(path, item))
                         if isinstance(item, h5py.Dataset) and not name.startswith(STATISTICS_GROUP) else None)
         attrs = {name: value for name, value in file.attrs.items()}
-    return Configuration(arrays=arrays, box_lower=attrs.pop("box_lower"), box_upper=attrs.pop("box_upper"),
-                         periodic=attrs.pop("periodic"), attrs=attrs)
+    return Configuration(arrays=_in_serial_order(arrays), box_lower=attrs.pop("box_lower"),
+                         box_upper=attrs.pop("box_upper"), periodic=attrs.pop("periodic"), attrs=attrs)
+
+
+def _read_array(path: Path, dataset: h5py.Dataset) -> np.ndarray:
+    """The values of ``dataset``; a virtual one's part files must exist (HDF5 would read zeros instead)."""
+    if dataset.is_virtual:
+        for source in dataset.virtual_sources():
+            if not (Path(path).parent / source.file_name).is_file():
+                raise OutputError(f"task file {path} joins the ranks' files in {parts_folder(path)}, and "
+                                  f"{source.file_name} is missing: copy or move the task file with that folder")
+    return dataset[()]
+
+
+def _in_serial_order(arrays: dict) -> dict:
+    """The arrays of a spread configuration (rows in rank order) in the serial order, without the index
+    that orders them; other configurations as they are."""
+    if PARTICLE_ORDER not in arrays:
+        return arrays
+    ordered = dict(arrays)
+    for group, key in SERIAL_ORDER.items():
+        order = np.argsort(arrays[key], kind="stable")
+        for name, array in arrays.items():
+            if name.startswith(group):
+                ordered[name] = array[order]
+    del ordered[PARTICLE_ORDER]
+    return ordered

@@ -20,6 +20,11 @@ particle before it is committed, on every rank):
 5. each rank sends its newly committed particles to the ranks whose region holds one of their
    sphere centres, and inserts those it receives; they withdraw the present particles they touch.
 
+What a rank holds: the inputs of its own particles alone (:func:`deposit_streamed` reads the
+particles in chunks, twice: once to validate them and survey what the decomposition needs of all,
+once to keep its own), their settled spheres, and the committed spheres of the others in its
+region; so about N/K of the sediment and a border.
+
 Why it is the serial sediment: a descent reads only sediment spheres in grid cells that meet its
 rectangle, and the grid's lists hold them in the serial order (keys).  A particle committed at
 the frontier was settled on a local sediment that, within its rectangle widened by a column, held
@@ -36,16 +41,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsim.core import sdbd
-from parsim.core.jit import jit
 from parsim.core.sdbd import blocks, grid as grid_module
-from parsim.core.sdbd.blocks import (ABSENT, FAIL_CONFLICT, FAIL_REGION, FAIL_STOPPED, FINAL, N_FAILURES, PRESENT,
-                                     STOPPED)
+from parsim.core.sdbd.blocks import FAIL_CONFLICT, FAIL_REGION, FINAL, N_FAILURES, STOPPED
 from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, N_EVENT_KINDS
 from parsim.errors import JobError
 from parsim.parallel.collective import abort_if_alone
 
-__all__ = ["BlockLayout", "deposit_decomposed", "DecomposedDeposition", "DecompositionError", "InvalidDeposition",
-           "default_halo"]
+__all__ = ["BlockLayout", "CellGrowth", "deposit_decomposed", "deposit_streamed", "DecomposedDeposition",
+           "DecompositionError", "InvalidDeposition", "default_halo", "drop_order", "spans"]
 
 #: particles per rank in a round's window of drop indices
 WINDOW_PER_RANK = 512
@@ -63,29 +66,45 @@ class DecompositionError(RuntimeError):
     decomposition, found by the checks of ``deposit_decomposed(..., check=True)``)."""
 
 
-def default_halo(prep) -> float:
-    """The halo (how far a region reaches beyond its block) for a deposition: four columns and twice
-    the largest particle extent, 5 diameters for spheres, wider than what nearly every particle's
-    descent reads beyond its drop point in a box (a heap's particles roll farther; their owners
-    fetch what they miss).  On 2 ranks it was the fastest of 3 to 9 diameters (docs/benchmarks.md)."""
+def default_halo(prep, largest_scale, largest_cell) -> float:
+    """The halo (how far a region reaches beyond its block) for a deposition of particles of size factors
+    up to ``largest_scale`` and a grid's cell that grows to ``largest_cell``: four columns and twice the
+    largest particle extent, 5 diameters for spheres, wider than what nearly every particle's descent
+    reads beyond its drop point in a box (a heap's particles roll farther; their owners fetch what they
+    miss).  On 2 ranks it was the fastest of 3 to 9 diameters (docs/benchmarks.md)."""
     extent = 0.0
     for s in range(len(prep.shape_start) - 1):
         a, b = prep.shape_start[s], prep.shape_start[s + 1]
         extent = max(extent, float(np.max(np.linalg.norm(prep.shape_offsets[a:b], axis=1) + prep.shape_radii[a:b])))
-    scale = float(np.max(prep.particle_scale)) if len(prep.particle_scale) else 1.0
-    return 4.0 * _largest_cell(prep) + 2.0 * extent * scale
+    return 4.0 * largest_cell + 2.0 * extent * largest_scale
 
 
-def _largest_cell(prep) -> float:
-    """The grid's cell at the end of the run: the largest sphere diameter, substrate included."""
-    cells = _cells_after(prep)
-    return float(cells[-1]) if len(cells) else prep.first_cell
+class CellGrowth:
+    """The grid's cell after each particle's arrival (the largest sphere diameter so far, at least the
+    first cell), kept as the particles at which it grows: a few numbers, whatever the number of
+    particles.  :meth:`add` takes the particles in drop order, chunk after chunk."""
 
+    def __init__(self, first_cell):
+        self.at = [0]  # particle indices where the cell changes (0: its first value)
+        self.cell = [float(first_cell)]
+        self.seen = 0
 
-def _cells_after(prep) -> np.ndarray:
-    """The grid's cell after each particle's arrival (the largest sphere diameter so far)."""
-    diameters = 2.0 * prep.particle_scale * prep.shape_largest_radius[prep.particle_shape]
-    return np.maximum.accumulate(np.maximum(diameters, prep.first_cell)) if len(diameters) else diameters
+    def add(self, prep) -> None:
+        """The particles of ``prep`` (a chunk), the next in drop order."""
+        diameters = 2.0 * prep.particle_scale * prep.shape_largest_radius[prep.particle_shape]
+        running = np.maximum.accumulate(np.maximum(diameters, self.cell[-1]))
+        grows = np.flatnonzero(np.diff(np.concatenate([[self.cell[-1]], running])) > 0)
+        self.at += (self.seen + grows).tolist()
+        self.cell += running[grows].tolist()
+        self.seen += len(diameters)
+
+    def after(self, particle) -> float:
+        """The cell once ``particle`` has arrived."""
+        return self.cell[np.searchsorted(self.at, particle, side="right") - 1]
+
+    def growth(self) -> np.ndarray:
+        """The particles larger than every one before them (the cell grows when they arrive)."""
+        return np.array(self.at[1:], dtype=np.int64)
 
 
 class BlockLayout:
@@ -95,12 +114,13 @@ class BlockLayout:
     reach to infinity.  ``region(k)`` is block ``k`` widened by ``halo`` on both sides (on a
     periodic box's circle, the whole circle if that covers it)."""
 
-    def __init__(self, lateral, box_lower_xy, box_upper_xy, drop_x, n_blocks, halo):
+    def __init__(self, lateral, box_lower_xy, box_upper_xy, drop_x_range, n_blocks, halo):
         self.periodic = lateral == LATERAL_PERIODIC
         self.n_blocks = int(n_blocks)
         self.halo = float(halo)
-        if lateral == LATERAL_NONE:
-            low, high = (float(np.min(drop_x)), float(np.max(drop_x))) if len(drop_x) else (0.0, 1.0)
+        if lateral == LATERAL_NONE:  # the drop points' range of x
+            low, high = (float(drop_x_range[0]), float(drop_x_range[1])) if drop_x_range[0] <= drop_x_range[1] \
+                else (0.0, 1.0)
         else:
             low, high = float(box_lower_xy[0]), float(box_upper_xy[0])
         self.low, self.length = low, high - low
@@ -126,9 +146,12 @@ class BlockLayout:
 @dataclass
 class DecomposedDeposition:
     """One rank's share of a deposition spread over ranks: its committed particles (rows, in drop
-    order) and what the run counted.  :meth:`gather` assembles the serial result on one rank."""
+    order: their places in it, their shapes and size factors, and how they settled) and what the run
+    counted.  :meth:`gather` assembles the serial result on one rank."""
 
     index: np.ndarray
+    particle_shape: np.ndarray
+    particle_scale: np.ndarray
     center_of_mass: np.ndarray
     rotation: np.ndarray
     contacts: np.ndarray
@@ -142,6 +165,11 @@ class DecomposedDeposition:
     clocked_seconds: float
     tally: dict
 
+    @property
+    def particle(self) -> np.ndarray:
+        """The particle (drop index) of each sphere."""
+        return np.repeat(self.index, self.sphere_count)
+
     def gather(self, comm, root=0):
         """The :class:`parsim.core.sdbd.DepositionResult` of the whole sediment on rank ``root``
         (None on the others)."""
@@ -153,13 +181,11 @@ class DecomposedDeposition:
             return np.concatenate([getattr(p, name) for p in parts])
 
         index = joined("index")
-        order = np.argsort(index, kind="stable")
         counts = joined("sphere_count")
-        ordered = counts[order]
-        take = _spans((np.cumsum(counts) - counts)[order], ordered)
+        order, take = drop_order(index, counts)
         return sdbd.DepositionResult(
             positions=joined("positions")[take], radii=joined("radii")[take],
-            particle=np.repeat(index[order], ordered), center_of_mass=joined("center_of_mass")[order],
+            particle=np.repeat(index[order], counts[order]), center_of_mass=joined("center_of_mass")[order],
             rotation=joined("rotation")[order], contacts=joined("contacts")[order], state=joined("state")[order],
             event_counts=joined("event_counts")[order], steps=joined("steps")[order], stopped_at=self.stopped_at,
             clocked_seconds=self.clocked_seconds)
@@ -167,59 +193,150 @@ class DecomposedDeposition:
 
 def deposit_decomposed(comm, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                        particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
-                       trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
-                       clock_from_particle=-1, wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX,
-                       cylinder=None, substrate_positions=None, substrate_radii=None, halo=None,
-                       window_per_rank=WINDOW_PER_RANK, check=False) -> DecomposedDeposition:
+                       **options) -> DecomposedDeposition:
     """:func:`parsim.core.sdbd.deposit` spread over the ranks of ``comm`` (collective; every rank
     passes the same arguments): each rank returns its share, whose :meth:`~DecomposedDeposition.gather`
-    is bitwise the serial result.  ``halo`` is how far a rank's region reaches beyond its block
+    is bitwise the serial result.  ``options``: those of :func:`deposit_streamed`."""
+
+    def chunks():
+        yield particle_shape, particle_scale, particle_rotation, particle_drop_xy
+
+    return deposit_streamed(comm, shape_offsets, shape_radii, shape_start, chunks, box_lower_xy, box_upper_xy,
+                            lateral, floor, **options)
+
+
+def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chunks, box_lower_xy, box_upper_xy,
+                     lateral, floor, trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
+                     clock_from_particle=-1, wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX,
+                     cylinder=None, substrate_positions=None, substrate_radii=None, halo=None,
+                     window_per_rank=WINDOW_PER_RANK, check=False) -> DecomposedDeposition:
+    """:func:`deposit_decomposed` of particles that no rank holds all of: ``particle_chunks()`` yields
+    ``(particle_shape, particle_scale, particle_rotation, particle_drop_xy)`` of consecutive particles in
+    drop order, the same on every rank, and starts again from the first at every call (it is called
+    twice); each rank keeps the inputs of the particles it owns.  The other arguments are those of
+    :func:`parsim.core.sdbd.deposit`, and ``halo`` is how far a rank's region reaches beyond its block
     (default :func:`default_halo`); a box whose blocks would be narrower than the halo is settled
     whole by rank 0.  ``window_per_rank`` sets the drop indices of a round (that many per rank).
     ``clocked_seconds`` (of the gathered result) is the wall-clock time from the round in which
     particle ``clock_from_particle`` was committed to the end (NaN when it is -1).
     With ``check``, every particle's owner fingerprints the sediment its descent read when it settles
     it and again when it commits it, and raises :class:`DecompositionError` if they differ."""
+    settings = dict(trial_angle=trial_angle, cycle_n=cycle_n, cycle_eps=cycle_eps,
+                    max_events_per_particle=max_events_per_particle, wall_contact=wall_contact, container=container,
+                    cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii)
     try:
         try:
-            prep = sdbd.prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                                           particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy,
-                                           lateral, floor, trial_angle, cycle_n, cycle_eps, max_events_per_particle,
-                                           wall_contact, container, cylinder, substrate_positions, substrate_radii)
-            halo = default_halo(prep) if halo is None else float(halo)
+            survey = _Survey(shape_offsets, shape_radii, shape_start, particle_chunks, box_lower_xy, box_upper_xy,
+                             lateral, floor, settings)
+            halo = default_halo(survey.prep, survey.largest_scale, survey.cells.cell[-1]) if halo is None \
+                else float(halo)
             if not (np.isfinite(halo) and halo > 0):
                 raise ValueError(f"halo must be a finite length > 0, got {halo}")
         except ValueError as error:
             raise InvalidDeposition(str(error)) from error
-        layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.particle_drop_xy[:, 0],
+        prep = survey.prep
+        layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, survey.drop_x_range,
                              comm.Get_size(), halo)
         if layout.length / layout.n_blocks < halo:  # blocks narrower than the halo: the task runs whole
-            layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.particle_drop_xy[:, 0], 1,
-                                 halo)
-        return _RankRun(comm, prep, layout, max(1, int(window_per_rank)) * layout.n_blocks, check,
+            layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, survey.drop_x_range, 1, halo)
+        own = survey.own_particles(layout, comm.Get_rank())
+        return _RankRun(comm, own, survey, layout, max(1, int(window_per_rank)) * layout.n_blocks, check,
                         int(clock_from_particle)).run()
     except BaseException as error:
         abort_if_alone(comm, error)  # the other ranks would wait in a collective: end them all, with one line
         raise
 
 
+class _Survey:
+    """A first pass over the particles, chunk by chunk: each chunk validated as :func:`parsim.core.sdbd.deposit`
+    validates its arguments, and what the decomposition needs of all of them (their number and
+    spheres, the range of drop points, the largest size factor, the growth of the grid's cell)."""
+
+    def __init__(self, shape_offsets, shape_radii, shape_start, particle_chunks, box_lower_xy, box_upper_xy,
+                 lateral, floor, settings):
+        self.shapes = (shape_offsets, shape_radii, shape_start)
+        self.container = (box_lower_xy, box_upper_xy, lateral, floor)
+        self.settings = settings
+        self.particle_chunks = particle_chunks
+        self.prep, self.cells = None, None
+        self.n_particles = self.n_spheres = 0
+        self.largest_scale = 0.0
+        self.drop_x_range = (np.inf, -np.inf)
+        for chunk in self._prepared_chunks():
+            self._add(chunk)
+        if self.prep is None:  # no particle at all: deposit's own checks and error
+            self.prep = sdbd.prepare_deposition(*self.shapes, np.zeros(0, dtype=np.int64), np.zeros(0),
+                                                np.zeros((0, 4)), np.zeros((0, 2)), *self.container, **settings)
+            self.cells = CellGrowth(self.prep.first_cell)
+            self.largest_scale = 1.0
+
+    def _prepared_chunks(self):
+        first = 0
+        for shape, scale, rotation, drop_xy in self.particle_chunks():
+            chunk = sdbd.prepare_deposition(*self.shapes, shape, scale, rotation, drop_xy, *self.container,
+                                            **self.settings, first_particle=first)
+            yield chunk
+            first += len(chunk.particle_shape)
+
+    def _add(self, chunk) -> None:
+        if not len(chunk.particle_shape):
+            return
+        if self.prep is None:  # the first particle sets the grid's first cell
+            self.prep, self.cells = chunk, CellGrowth(chunk.first_cell)
+        self.cells.add(chunk)
+        self.n_particles += len(chunk.particle_shape)
+        self.n_spheres += chunk.n_spheres
+        self.largest_scale = max(self.largest_scale, float(np.max(chunk.particle_scale)))
+        x = chunk.particle_drop_xy[:, 0]
+        self.drop_x_range = (min(self.drop_x_range[0], float(x.min())), max(self.drop_x_range[1], float(x.max())))
+
+    def own_particles(self, layout, rank) -> "_OwnParticles":
+        """A second pass: the particles dropped in ``rank``'s block, their inputs and their first sphere key."""
+        kept, index, first_key = [], [], []
+        first = spheres = 0
+        n_substrate = len(self.prep.substrate_radii)
+        for chunk in self._prepared_chunks():
+            counts = np.diff(chunk.shape_start)[chunk.particle_shape]
+            mine = np.flatnonzero(layout.owners(chunk.particle_drop_xy[:, 0]) == rank)
+            kept.append(tuple(array[mine] for array in chunk.kernel_inputs()[3:]))
+            index.append(first + mine)
+            first_key.append(n_substrate + spheres + (np.cumsum(counts) - counts)[mine])
+            first += len(counts)
+            spheres += int(counts.sum())
+        columns = [np.concatenate([part[k] for part in kept]) for k in range(4)] if kept else \
+            [array for array in self.prep.kernel_inputs()[3:]]
+        prep = self.prep._replace(particle_shape=columns[0], particle_scale=columns[1], particle_rotation=columns[2],
+                                  particle_drop_xy=columns[3], n_spheres=self.n_spheres)
+        return _OwnParticles(prep, np.concatenate(index + [np.zeros(0, dtype=np.int64)]),
+                             np.concatenate(first_key + [np.zeros(0, dtype=np.int64)]))
+
+
+@dataclass
+class _OwnParticles:
+    """A rank's particles: ``prep``'s particle arrays hold their inputs (row by row), ``index`` their places
+    in the drop order, ``first_key`` the serial index of their first sphere (substrate included)."""
+
+    prep: object
+    index: np.ndarray
+    first_key: np.ndarray
+
+
 class _RankRun:
     """The rounds of :func:`deposit_decomposed` on one rank (see the module docs)."""
 
-    def __init__(self, comm, prep, layout, window, check, clock_from):
+    def __init__(self, comm, own, survey, layout, window, check, clock_from):
         self.comm = comm
         self.rank = comm.Get_rank()
-        self.prep = prep
+        self.prep = prep = own.prep
+        self.n_particles = survey.n_particles
         self.layout = layout
         self.window = window
         self.periodic = layout.periodic
         self.length = (prep.box_upper_xy - prep.box_lower_xy).astype(float)
         n_sub = len(prep.substrate_radii)
-        counts = np.diff(prep.shape_start)[prep.particle_shape]
-        owners = layout.owners(prep.particle_drop_xy[:, 0])
-        self.index = np.flatnonzero(owners == self.rank)
-        self.count = counts[self.index]
-        self.first_key = (n_sub + np.cumsum(counts) - counts)[self.index]
+        self.index = own.index
+        self.count = np.diff(prep.shape_start)[prep.particle_shape]
+        self.first_key = own.first_key
         self.sphere_row = np.cumsum(self.count) - self.count
         n = len(self.index)
         self.slot = np.full(n, -1, dtype=np.int64)
@@ -236,8 +353,8 @@ class _RankRun:
         self.signatures = np.zeros((n if check else 0, 2), dtype=np.int64)
         self.spheres = np.zeros((int(self.count.sum()), 3))
         self.n_max = int(np.max(np.diff(prep.shape_start)))
-        self.cells = _cells_after(prep)
-        self.growth = np.flatnonzero(np.diff(self.cells) > 0) + 1
+        self.cells = survey.cells
+        self.growth = self.cells.growth()
         self.growth_set = set(self.growth.tolist())
         self.settled_end = 0
         self.fetched = set()
@@ -292,13 +409,13 @@ class _RankRun:
         self._give_slots(first_row, last_row)
         given_top = np.nan
         if last_row == first_row + 1:
-            particle = int(self.index[first_row])
-            if self.cells[particle] > self.grid[0][6]:  # the serial run drops it, then grows the grid
-                given_top = blocks.drop_top(particle, *prep.kernel_inputs(), self.grid, self.centre, self.radius,
+            cell = self.cells.after(int(self.index[first_row]))
+            if cell > self.grid[0][6]:  # the serial run drops it, then grows the grid
+                given_top = blocks.drop_top(first_row, *prep.kernel_inputs(), self.grid, self.centre, self.radius,
                                             prep.length_scale, self.n_max)
-                self._set_cell(self.cells[particle])
+                self._set_cell(cell)
         self.grid = blocks.settle_rows(
-            first_row, last_row, self.settled_end, self.index, *prep.kernel_inputs(), self.grid, self.centre,
+            first_row, last_row, self.settled_end, *prep.kernel_inputs(), self.grid, self.centre,
             self.radius, self.key, *prep.kernel_settings(), self.status, self.footprint, self.rectangle,
             self.slot, self.count, self.first_key, self.com, self.rot, self.contacts, self.state, self.events,
             self.steps, self.chunks, self.spheres, self.sphere_row, self.margin, self.n_max, self.tally["settles"],
@@ -320,20 +437,20 @@ class _RankRun:
     def _parcel(self, rows):
         """The spheres of ``rows`` as sent to another rank: counts, footprints, keys, wrapped centres, radii."""
         counts = self.count[rows]
-        slots = _spans(self.slot[rows], counts)
+        slots = spans(self.slot[rows], counts)
         return counts, self.footprint[rows], self.key[slots], self.centre[slots], self.radius[slots]
 
     # ------------------------------------------------------------------ rounds
     def run(self) -> DecomposedDeposition:
-        n_particles = len(self.prep.particle_shape)
+        n_particles = self.n_particles
         frontier = 0
         stopped_at = -1
         clock_start = None
         while frontier < n_particles and stopped_at < 0:
             self.tally["rounds"] += 1
-            self._set_cell(self.prep.first_cell if frontier == 0 else self.cells[frontier - 1])
+            self._set_cell(self._cell_before(frontier))
             end = self._window_end(frontier, n_particles)
-            self.margin = self._column_side(self.cells[end - 1])
+            self.margin = self._column_side(self.cells.after(end - 1))
             first_row, last_row = np.searchsorted(self.index, [frontier, end])
             started = time.perf_counter()
             self._settle(first_row, last_row)
@@ -364,6 +481,10 @@ class _RankRun:
             frontier = new_frontier
         clocked = time.perf_counter() - clock_start if clock_start is not None else float("nan")
         return self._share(stopped_at, clocked)
+
+    def _cell_before(self, particle):
+        """The grid's cell when ``particle`` is dropped."""
+        return self.prep.first_cell if particle == 0 else self.cells.after(particle - 1)
 
     def _column_side(self, cell):
         if cell not in self.column_sides:
@@ -477,7 +598,8 @@ class _RankRun:
         """Settle ``particle``, at the frontier, on the committed spheres its owner fetches from every
         rank, until its rectangle stays in what the owner holds; returns whether it stopped at the
         event limit.  Collective."""
-        owner = int(self.layout.owners(self.prep.particle_drop_xy[particle:particle + 1, 0])[0])
+        from mpi4py import MPI
+        owner = self.comm.allreduce(self.rank if self._owns(particle) else self.comm.Get_size(), op=MPI.MIN)
         reach = 2.0 * self.margin
         region = self.layout.region(owner)
         row = self._row(particle) if self.rank == owner else -1
@@ -489,7 +611,7 @@ class _RankRun:
                 for source, parcel in enumerate(parts):
                     if source != owner:  # the owner's own particles are in its sediment
                         self._insert(self._not_fetched(parcel), row)
-                self._set_cell(self.prep.first_cell if particle == 0 else self.cells[particle - 1])
+                self._set_cell(self._cell_before(particle))
                 self._withdraw(row)
                 self._settle(row, row + 1)
                 box = self._widened(row, self.margin)
@@ -538,15 +660,16 @@ class _RankRun:
         return counts[new], footprints[new], keys[spheres], centres[spheres], radii[spheres]
 
     def _share(self, stopped_at, clocked_seconds) -> DecomposedDeposition:
-        done = len(self.prep.particle_shape) if stopped_at < 0 else stopped_at
+        done = self.n_particles if stopped_at < 0 else stopped_at
         rows = np.flatnonzero((self.status == FINAL) & (self.index < done))
-        spheres = _spans(self.sphere_row[rows], self.count[rows])
-        slots = _spans(self.slot[rows], self.count[rows])
+        spheres = spans(self.sphere_row[rows], self.count[rows])
+        slots = spans(self.slot[rows], self.count[rows])
         tally = dict(self.tally, settles=int(self.tally["settles"][0]), particles=len(rows),
                      chunk_steps=int(self.chunks[rows].sum()))
-        return DecomposedDeposition(self.index[rows], self.com[rows], self.rot[rows], self.contacts[rows],
-                                    self.state[rows], self.events[rows], self.steps[rows], self.count[rows],
-                                    self.spheres[spheres], self.radius[slots], stopped_at, clocked_seconds, tally)
+        return DecomposedDeposition(self.index[rows], self.prep.particle_shape[rows], self.prep.particle_scale[rows],
+                                    self.com[rows], self.rot[rows], self.contacts[rows], self.state[rows],
+                                    self.events[rows], self.steps[rows], self.count[rows], self.spheres[spheres],
+                                    self.radius[slots], stopped_at, clocked_seconds, tally)
 
 
 def _box_within(box, extent, length, periodic):
@@ -559,7 +682,14 @@ def _hull(a, b):
     return np.array([min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3])])
 
 
-def _spans(starts, counts):
+def drop_order(index, sphere_count):
+    """The order that puts particles of drop indices ``index`` (each with ``sphere_count`` spheres, particle
+    after particle) in the drop order, and the sphere rows in that order."""
+    order = np.argsort(index, kind="stable")
+    return order, spans((np.cumsum(sphere_count) - sphere_count)[order], sphere_count[order])
+
+
+def spans(starts, counts):
     """The indices ``starts[k] .. starts[k] + counts[k] - 1`` of every ``k``, one after the other."""
     counts = np.asarray(counts, dtype=np.int64)
     return np.repeat(np.asarray(starts, dtype=np.int64) - (np.cumsum(counts) - counts), counts) \

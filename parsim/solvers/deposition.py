@@ -9,10 +9,12 @@ floor or a fixed substrate; then the sediment's statistics are measured
 (:mod:`.deposition_statistics`).
 
 With ``parsim run --ranks-per-task K > 1`` a task's sediment is spread over its group's K ranks
-(:mod:`parsim.parallel.deposition`), bitwise the serial sediment, and assembled on the group's rank
-0, which measures its statistics and writes it.
+(:mod:`parsim.parallel.deposition`), bitwise the serial sediment, and stays spread: its statistics
+are reduced over the ranks (:mod:`parsim.parallel.deposition_statistics`) and each rank writes its
+particles to its own file, joined by the task file (:mod:`parsim.output.snapshot`).
 """
 
+import copy
 import math
 import os
 from dataclasses import dataclass
@@ -30,9 +32,10 @@ from parsim.solver import LENGTH_UNITS, Configuration, Solver, TableArray, TaskR
 from parsim.solvers import deposition_statistics as statistics
 from parsim.solvers.deposition_materials import (
     SPECIES_KEYS,
+    Drops,
     Species,
     check_species,
-    draw_particles,
+    ParticleDraws,
     species_of,
     species_parameters,
     species_shape,
@@ -58,6 +61,7 @@ BYTES_PER_MESH_FILE_BYTE = 20  # ... and the triangles, per byte of the mesh fil
 BYTES_PER_GRID_COLUMN = 72  # a column of the sediment grid: its first 8 cells and its height
 CYLINDER_FLATNESS = 0.01  # automatic container_sides: the polygon departs from the circle by at most this
 # times the smallest sphere radius
+PARTICLE_CHUNK = 1 << 20  # particles a rank of a spread task draws at a time (72 MB of inputs), keeping its own
 WARM_UP_PARTICLES = 4  # particles of the warm-up run, which compiles the kernels before any task
 WARM_UP_PACKING_SAMPLES = 1000  # the fewest allowed
 # Upper bounds of keys beyond which a value means nothing and only costs time or memory:
@@ -463,47 +467,82 @@ def _spheres_of(params: dict, entry: dict) -> int:
             "cube": size**3 - max(size - 2, 0) ** 3}[shape]
 
 
-def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult | None:
-    """One task on the ranks of ``comm`` (:func:`parsim.parallel.deposition.deposit_decomposed` on
-    several); the result is on its rank 0, the other ranks return None."""
+def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
+    """One task on the ranks of ``comm`` (:func:`parsim.parallel.deposition.deposit_streamed` on
+    several); every rank returns the statistics and its share of the configuration."""
     species = species_of(params)
     n = params["n_particles"]
-    # sizes, orientations and drop points each from their own stream, the species from a fourth:
-    # the first k particles of a task are those of the same task with n_particles = k, and so is
-    # their sediment
-    size_rng, rotation_rng, drop_rng = rng.spawn(3)
-    species_rng = rng.spawn(1)[0]
-    drops = draw_particles(params, species, species_rng, size_rng)
-    rotation = shape_library.random_rotations(n, rotation_rng)
     geometry = _container(params, species)
-    drop_xy = _drop_positions(params, geometry, species, drops, drop_rng)
     substrate = substrate_spheres(params)
     skip = int(params["timing_skip_fraction"] * n)
-    start = np.cumsum([0, *(len(s.radii) for s in species)])
-    arguments = (np.concatenate([s.offsets for s in species]), np.concatenate([s.radii for s in species]), start,
-                 drops.species, drops.scale, rotation, drop_xy, geometry.lower, geometry.upper, geometry.lateral,
-                 FLOOR[params["floor"]])
+    shapes = (np.concatenate([s.offsets for s in species]), np.concatenate([s.radii for s in species]),
+              np.cumsum([0, *(len(s.radii) for s in species)]))
+    container = (geometry.lower, geometry.upper, geometry.lateral, FLOOR[params["floor"]])
     options = dict(wall_contact=WALL_CONTACTS[params["wall_contact"]], trial_angle=params["trial_angle"],
                    cycle_n=params["cycle_n"], cycle_eps=params["cycle_eps"],
                    max_events_per_particle=params["max_events_per_particle"],
                    clock_from_particle=skip if skip < n else -1, container=geometry.container,
                    cylinder=geometry.cylinder, substrate_positions=substrate[0] if len(substrate[1]) else None,
                    substrate_radii=substrate[1] if len(substrate[1]) else None)
-    if comm is not None and comm.Get_size() > 1:  # bitwise the serial sediment, assembled on the group's rank 0
-        from parsim.parallel.deposition import deposit_decomposed
-
-        result = deposit_decomposed(comm, *arguments, **options).gather(comm)
-        if result is None:
-            return None
-    else:
-        result = sdbd.deposit(*arguments, **options)
-    if result.stopped_at >= 0:
-        raise NumericalError(f"particle {result.stopped_at} (of {n}) needed more than max_events_per_particle = "
-                             f"{params['max_events_per_particle']} events; raise the limit or check the shape")
-    if not np.all(np.isfinite(result.positions)):
-        raise NumericalError("non-finite sphere positions in the sediment")
+    if comm is not None and comm.Get_size() > 1:
+        chunks = _particle_chunks(params, species, geometry, rng, PARTICLE_CHUNK)
+        return _solve_spread(comm, params, chunks, shapes, container, options, species, geometry, skip, substrate)
+    drops, rotation, drop_xy = next(_particle_chunks(params, species, geometry, rng, max(n, 1))())
+    result = sdbd.deposit(*shapes, drops.species, drops.scale, rotation, drop_xy, *container, **options)
+    _check_sediment(params, result.stopped_at, np.all(np.isfinite(result.positions)))
     return TaskResult(statistics.measure(params, result, species, drops, geometry, skip, substrate),
                       _configuration(params, geometry, result, species, drops, substrate))
+
+
+def _particle_chunks(params, species, geometry, rng, chunk):
+    """The task's particles, ``chunk`` at a time: a function whose every call yields ``(drops, rotation,
+    drop_xy)`` of consecutive particles from the first on (each call reads copies of the streams)."""
+    # sizes, orientations and drop points each from their own stream, the species from a fourth:
+    # the first k particles of a task are those of the same task with n_particles = k, and so is
+    # their sediment
+    size_rng, rotation_rng, drop_rng = rng.spawn(3)
+    species_rng = rng.spawn(1)[0]
+    n = params["n_particles"]
+
+    def chunks():
+        species_stream, size_stream, rotation_stream, drop_stream = copy.deepcopy(
+            (species_rng, size_rng, rotation_rng, drop_rng))
+        draws = ParticleDraws(params, species, species_stream, size_stream)
+        for first in range(0, n, chunk):
+            drops = draws.draw(min(chunk, n - first))
+            yield (drops, shape_library.random_rotations(len(drops.scale), rotation_stream),
+                   _drop_positions(params, geometry, species, drops, drop_stream))
+
+    return chunks
+
+
+def _solve_spread(comm, params, chunks, shapes, container, options, species, geometry, skip, substrate) -> TaskResult:
+    """The task on the ranks of ``comm``: the sediment, bitwise the serial one, stays spread over them
+    and no rank holds every particle; each rank returns the statistics, reduced over the ranks, and
+    its share of the configuration."""
+    from mpi4py import MPI
+
+    from parsim.parallel.deposition import deposit_streamed
+    from parsim.parallel.deposition_statistics import measure_decomposed
+
+    def inputs():
+        return ((drops.species, drops.scale, rotation, drop_xy) for drops, rotation, drop_xy in chunks())
+
+    share = deposit_streamed(comm, *shapes, inputs, *container, **options)
+    _check_sediment(params, share.stopped_at,
+                    comm.allreduce(bool(np.all(np.isfinite(share.positions))), op=MPI.LAND))
+    own = Drops(share.particle_shape, share.particle_scale)
+    return TaskResult(measure_decomposed(comm, params, share, species, own, geometry, skip, substrate),
+                      _configuration(params, geometry, share, species, own, substrate, comm))
+
+
+def _check_sediment(params, stopped_at, finite) -> None:
+    if stopped_at >= 0:
+        raise NumericalError(f"particle {stopped_at} (of {params['n_particles']}) needed more than "
+                             f"max_events_per_particle = {params['max_events_per_particle']} events; raise the "
+                             "limit or check the shape")
+    if not finite:
+        raise NumericalError("non-finite sphere positions in the sediment")
 
 
 @dataclass(frozen=True)
@@ -526,8 +565,8 @@ def _container(params, species) -> _Geometry:
 
 
 def _drop_positions(params, geometry, species, drops, rng):
-    """Horizontal release positions of the centres of mass."""
-    n = params["n_particles"]
+    """Horizontal release positions of the centres of mass of ``drops``."""
+    n = len(drops.scale)
     extents = np.array([s.extent for s in species])
     if geometry.cylinder is not None:  # the whole particle starts inside the polygon, whatever its orientation
         cx, cy, radius, sides = geometry.cylinder
@@ -553,31 +592,43 @@ def _on_disc(uniform, radius, centre):
     return np.column_stack([centre[0] + distance * np.cos(angle), centre[1] + distance * np.sin(angle)])
 
 
-def _configuration(params, geometry, result, species, drops, substrate) -> Configuration:
-    top = float(np.max(result.positions[:, 2] + result.radii))
+def _configuration(params, geometry, result, species, drops, substrate, comm=None) -> Configuration:
+    """The task file's configuration of the sediment ``result`` (a :class:`parsim.core.sdbd.DepositionResult`);
+    with ``comm``, this rank's share (a :class:`parsim.parallel.deposition.DecomposedDeposition`, ``drops``
+    its particles') of a sediment spread over the ranks of ``comm`` (collective)."""
+    top = float(np.max(result.positions[:, 2] + result.radii, initial=-np.inf))
     periodic = geometry.cylinder is None and params["lateral"] == "periodic"
     if geometry.cylinder is None and params["lateral"] == "none":  # the heap's extent
-        lower = (result.positions[:, :2] - result.radii[:, None]).min(axis=0)
-        upper = (result.positions[:, :2] + result.radii[:, None]).max(axis=0)
+        lower = (result.positions[:, :2] - result.radii[:, None]).min(axis=0, initial=np.inf)
+        upper = (result.positions[:, :2] + result.radii[:, None]).max(axis=0, initial=-np.inf)
     else:
         lower, upper = geometry.lower, geometry.upper
+    arrays = {"spheres/position": result.positions, "spheres/radius": result.radii, "spheres/particle": result.particle,
+              "particles/center_of_mass": result.center_of_mass, "particles/rotation": result.rotation,
+              "particles/shape": drops.species, "particles/scale": drops.scale, "particles/state": result.state,
+              "particles/contacts": result.contacts, "particles/event_counts": result.event_counts,
+              "particles/steps": result.steps}
+    rank_rows = ()
+    if comm is not None:
+        from mpi4py import MPI
+
+        # over the ranks' particles (numpy arrays reduced through buffers: elementwise)
+        bounds = np.array([top, -lower[0], -lower[1], upper[0], upper[1]], dtype=np.float64)
+        comm.Allreduce(MPI.IN_PLACE, bounds, op=MPI.MAX)
+        top, lower, upper = bounds[0], -bounds[1:3], bounds[3:5]
+        arrays["particles/index"] = result.index
+        rank_rows = tuple(arrays)
     attrs = {"floor_z": 0.0, "event_kinds": list(sdbd.EVENT_KINDS), "state_names": list(sdbd.STATE_NAMES),
              "shape_names": [s.name for s in species], "container": params["container"]}
     if geometry.cylinder is not None:
         attrs["cylinder"] = list(geometry.cylinder)  # centre x, y, radius, sides of the polygon
     return Configuration(
-        arrays={"spheres/position": result.positions, "spheres/radius": result.radii,
-                "spheres/particle": result.particle,
-                "particles/center_of_mass": result.center_of_mass, "particles/rotation": result.rotation,
-                "particles/shape": drops.species, "particles/scale": drops.scale,
-                "particles/state": result.state, "particles/contacts": result.contacts,
-                "particles/event_counts": result.event_counts, "particles/steps": result.steps,
-                "shapes/offsets": np.concatenate([s.offsets for s in species]),
+        arrays={**arrays, "shapes/offsets": np.concatenate([s.offsets for s in species]),
                 "shapes/radius": np.concatenate([s.radii for s in species]),
                 "shapes/start": np.cumsum([0, *(len(s.radii) for s in species)]),
                 "substrate/position": substrate[0], "substrate/radius": substrate[1]},
         box_lower=np.array([lower[0], lower[1], 0.0]), box_upper=np.array([upper[0], upper[1], top]),
-        periodic=np.array([periodic, periodic, False]), attrs=attrs)
+        periodic=np.array([periodic, periodic, False]), attrs=attrs, rank_rows=rank_rows)
 
 
 SOLVER = Solver(kind="deposition", description="steepest descent ballistic deposition of multi-sphere particles "

@@ -175,24 +175,41 @@ def check_species(params: dict) -> None:
                        f"allowed: n_particles = {total}")
 
 
-def draw_particles(params: dict, species: tuple[Species, ...], species_rng, size_rng) -> Drops:
-    """The species and the size factor of every particle, in deposition order."""
-    n = params["n_particles"]
-    index = np.empty(n, dtype=np.int64)
-    uniform = species_rng.random(n) if len(species) > 1 else np.zeros(n)
-    first = 0
-    for count, probabilities in _layer_plan(params, species):
-        cumulative = np.cumsum(probabilities)
-        cumulative /= cumulative[-1]
-        index[first:first + count] = np.searchsorted(cumulative, uniform[first:first + count], side="right")
-        first += count
-    index = np.minimum(index, len(species) - 1)  # round-off at the top of the cumulative
-    scale = np.empty(n)
-    streams = [size_rng] if len(species) == 1 else size_rng.spawn(len(species))
-    for s, stream in enumerate(streams):
-        mine = index == s
-        scale[mine] = species[s].size_factors(int(mine.sum()), stream)
-    return Drops(index, scale)
+class ParticleDraws:
+    """The species and the size factors of a task's particles in deposition order, drawn chunk after
+    chunk: successive :meth:`draw` calls give the particles one run after the other, the same as one
+    call for all (each stream is read in order, and a draw's first k values do not depend on its
+    length), so that a rank can keep the particles it owns without holding all."""
+
+    def __init__(self, params: dict, species: tuple[Species, ...], species_rng, size_rng):
+        self.species = species
+        self.species_rng = species_rng
+        self.size_streams = [size_rng] if len(species) == 1 else size_rng.spawn(len(species))
+        self.layers = []  # (first particle, end, normalised cumulative probabilities of the species)
+        first = 0
+        for count, probabilities in _layer_plan(params, species):
+            cumulative = np.cumsum(probabilities)
+            cumulative /= cumulative[-1]
+            self.layers.append((first, first + count, cumulative))
+            first += count
+        self.drawn = 0
+
+    def draw(self, count: int) -> Drops:
+        """The next ``count`` particles."""
+        first, end = self.drawn, self.drawn + count
+        uniform = self.species_rng.random(count) if len(self.species) > 1 else np.zeros(count)
+        index = np.empty(count, dtype=np.int64)
+        for layer_first, layer_end, cumulative in self.layers:
+            a, b = max(first, layer_first), min(end, layer_end)
+            if a < b:
+                index[a - first:b - first] = np.searchsorted(cumulative, uniform[a - first:b - first], side="right")
+        index = np.minimum(index, len(self.species) - 1)  # round-off at the top of the cumulative
+        scale = np.empty(count)
+        for s, stream in enumerate(self.size_streams):
+            mine = index == s
+            scale[mine] = self.species[s].size_factors(int(mine.sum()), stream)
+        self.drawn = end
+        return Drops(index, scale)
 
 
 def number_probabilities(params: dict, species: tuple[Species, ...]) -> np.ndarray:

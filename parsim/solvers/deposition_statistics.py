@@ -253,7 +253,7 @@ def measure(params, result, species, drops, geometry, skip, substrate) -> dict:
         "bulk_wall_distance": region.wall_distance,
         **_packing(params, result, region, heights, drops, len(species), positions, radii, sphere_in_area,
                    network.overlapping),
-        **_mixture(result, species, drops, volume, heights),
+        **mixture(result, species, drops, volume, heights),
         **_orientations(params, result, species, drops, in_bulk),
         "radial_distribution": _radial_distribution(params, com, diameter, region, slab),
         **_contacts(positions, radii, particle, region, in_bulk, network),
@@ -261,7 +261,7 @@ def measure(params, result, species, drops, geometry, skip, substrate) -> dict:
         "events_per_particle": float(result.event_counts.sum(axis=1).mean()),
         "largest_steps_per_particle": int(result.steps.max()),
         "hanging_particles": int(np.isin(result.state, HANGING).sum()),
-        "particles_on_floor": _particles_on_floor(result, CONTACT_GAP_TOLERANCE * float(np.mean(radii))),
+        "particles_on_floor": particles_on_floor(result, CONTACT_GAP_TOLERANCE * float(np.mean(radii))),
     }
     counted_spheres = int(np.sum(result.particle >= skip))
     statistics["spheres_per_second"] = (counted_spheres / result.clocked_seconds if result.clocked_seconds > 0
@@ -356,7 +356,7 @@ def _bulk_packing_fraction(positions, radii, region, slab, samples, overlapping)
             * box_area / area)
 
 
-def _mixture(result, species, drops, volume, heights) -> dict:
+def mixture(result, species, drops, volume, heights) -> dict:
     """Each species' count, volume share and mean height in the deposit, the segregation index, and the
     volumes of the species' particles and of the mesh fits."""
     count = np.bincount(drops.species, minlength=len(species))
@@ -388,7 +388,7 @@ def _mesh_error(s) -> tuple[float, float]:
 
 def _orientations(params, result, species, drops, in_bulk) -> dict:
     """Orientation order and the distribution of the angle to the vertical of the bulk particles' long axes."""
-    axes = _long_axes(result, species, drops)[in_bulk]
+    axes = long_axes(result, species, drops)[in_bulk]
     axes = axes[np.all(np.isfinite(axes), axis=1)]
     bins = params["orientation_bins"]
     if not len(axes):
@@ -397,18 +397,25 @@ def _orientations(params, result, species, drops, in_bulk) -> dict:
             "orientation_density": structure.angle_distribution(axes, bins)[1]}
 
 
-def _radial_distribution(params, centres, diameter, region, slab) -> np.ndarray:
-    """g(r) of the bulk's centres of mass on the job's shells (r over the mean volume-equivalent
-    ``diameter``); references lie at least r_max inside the bulk. Shells beyond half a periodic box's
-    width (minimum images) are NaN, and all are when the container has no room for a bulk."""
+def rdf_shells(params, diameter, region):
+    """g(r)'s usable shells and range r_max (shells beyond half a periodic box's width are left out); None
+    when none is left or the container has no room for a bulk."""
     bins = params["rdf_bins"]
     width = params["rdf_range"] * diameter / bins
     usable = bins
     if region.periodic:
         usable = min(bins, int(0.5 * float(np.min(region.upper - region.lower)) / width))
-    g = np.full(bins, np.nan)
-    if usable > 0 and region.bulk_area() > 0.0:
-        r_max = usable * width
+    return (usable, usable * width) if usable > 0 and region.bulk_area() > 0.0 else None
+
+
+def _radial_distribution(params, centres, diameter, region, slab) -> np.ndarray:
+    """g(r) of the bulk's centres of mass on the job's shells (r over the mean volume-equivalent
+    ``diameter``); references lie at least r_max inside the bulk. Shells beyond half a periodic box's
+    width (minimum images) are NaN, and all are when the container has no room for a bulk."""
+    g = np.full(params["rdf_bins"], np.nan)
+    shells = rdf_shells(params, diameter, region)
+    if shells is not None:
+        usable, r_max = shells
         z = centres[:, 2]
         in_bulk = (z >= slab[0]) & (z < slab[1]) & region.in_bulk_area(centres[:, :2])
         reference = np.flatnonzero((z >= slab[0] + r_max) & (z < slab[1] - r_max)
@@ -439,14 +446,14 @@ def _contacts(positions, radii, particle, region, in_bulk, network=None) -> dict
             "fabric_tensor": structure.fabric_tensor(normals[with_bulk])}
 
 
-def _particles_on_floor(result, tolerance) -> int:
+def particles_on_floor(result, tolerance) -> int:
     """Particles with a sphere touching the floor, z - r <= ``tolerance``, whatever state they rest in (with
     floor = "roll" a particle on the floor rests on three contacts, the floor one of them)."""
     touching = result.positions[:, 2] - result.radii <= tolerance
     return int(np.unique(result.particle[touching]).size)
 
 
-def _long_axes(result, species, drops) -> np.ndarray:
+def long_axes(result, species, drops) -> np.ndarray:
     """Unit long axis of every particle in the lab frame (NaN rows for shapes without one)."""
     axes = np.full((len(drops.species), 3), np.nan)
     for index, s in enumerate(species):

@@ -1,5 +1,6 @@
 """Deposit a set of small sediments with ``deposit_decomposed`` on every rank of ``mpiexec -n K``
-and, on rank 0, compare each with the serial ``deposit``; writes a JSON report to ``argv[1]``.
+and, on rank 0, compare each with the serial ``deposit``; writes a JSON report to ``argv[1]``.  Every
+other case gives the particles in chunks (``deposit_streamed``), of which each rank keeps its own.
 
 The cases cover every particle shape kind, container, floor, wall contact, a species mixture whose
 larger particles arrive later (the grid's cell grows), a substrate and a run that stops at the
@@ -15,7 +16,7 @@ from mpi4py import MPI
 
 from parsim.core import sdbd
 from parsim.core.shapes import cube, random_rotations, rod, sphere, spiky, tripod
-from parsim.parallel.deposition import deposit_decomposed
+from parsim.parallel.deposition import deposit_decomposed, deposit_streamed
 
 FIELDS = ("positions", "radii", "particle", "center_of_mass", "rotation", "contacts", "state", "event_counts",
           "steps", "stopped_at")
@@ -69,11 +70,21 @@ def cases():
     }
 
 
+def in_chunks(arrays, size):
+    """A function yielding ``arrays`` (particle_shape, particle_scale, particle_rotation, particle_drop_xy) in
+    chunks of ``size`` particles."""
+    return lambda: (tuple(array[first:first + size] for array in arrays) for first in range(0, len(arrays[0]), size))
+
+
 def main(report_path):
     comm = MPI.COMM_WORLD
     report = {}
-    for name, (args, options) in cases().items():
-        share = deposit_decomposed(comm, *args, **options, window_per_rank=48, check=True)
+    for number, (name, (args, options)) in enumerate(cases().items()):
+        if number % 2 == 0:  # every rank holds all particles' inputs
+            share = deposit_decomposed(comm, *args, **options, window_per_rank=48, check=True)
+        else:  # each rank keeps its own of chunks of 41 particles (the grid's cell grows within and across them)
+            share = deposit_streamed(comm, *args[:3], in_chunks(args[3:7], 41), *args[7:], **options,
+                                     window_per_rank=48, check=True)
         tallies = comm.gather(share.tally)
         whole = share.gather(comm)
         if comm.rank == 0:

@@ -364,11 +364,10 @@ def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, 
                        particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
                        trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
                        wall_contact=WALL_FRICTIONLESS, container=CONTAINER_BOX, cylinder=None,
-                       substrate_positions=None, substrate_radii=None):
+                       substrate_positions=None, substrate_radii=None, first_particle=0):
     """The arguments of :func:`deposit` validated (a ValueError names the first bad one) as a
-    :class:`PreparedDeposition`."""
-    from parsim.core.sdbd.rotation import quat_to_matrix
-
+    :class:`PreparedDeposition`; ``first_particle`` is the first particle's place in the drop order
+    when these are a chunk of a longer run (the errors name particles by it)."""
     from parsim.core.sdbd.rotation import quat_to_matrix
 
     offsets = np.ascontiguousarray(shape_offsets, dtype=np.float64)
@@ -454,7 +453,8 @@ def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, 
             else:
                 outside = np.any(xy - r[:, None] < lo - tol) or np.any(xy + r[:, None] > hi + tol)
             if outside:
-                raise ValueError(f"particle {p}: dropped at {tuple(pxy[p])}, it does not fit inside the walls")
+                raise ValueError(f"particle {first_particle + p}: dropped at {tuple(pxy[p])}, it does not fit "
+                                 "inside the walls")
     if lateral == LATERAL_NONE:
         lo = np.zeros(2)
         hi = np.zeros(2)

@@ -167,13 +167,13 @@ def insert_committed(n_particles, particle_count, particle_footprint, sphere_key
 
 
 @jit
-def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, shape_start, particle_shape,
+def settle_rows(first, last, settled_end, shape_offsets, shape_radii, shape_start, particle_shape,
                 particle_scale, particle_rotation, particle_drop_xy, grid_state, centre, radius, key, floor_mode,
                 wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell, status, footprint, rectangle, slot,
                 count, first_key, out_com, out_rot, out_contacts, out_state, out_events, out_steps, out_chunks,
                 out_sphere, sphere_row, margin, n_max, settles, signatures, given_top):
-    """Settle the absent rows among ``first .. last - 1`` in drop order (row ``o`` is particle
-    ``index[o]``), keeping the invariant of the module docs; rows from ``settled_end`` on were
+    """Settle the absent rows among ``first .. last - 1`` in drop order (row ``o``'s inputs are entry
+    ``o`` of the particle arrays), keeping the invariant of the module docs; rows from ``settled_end`` on were
     never settled.  Each writes its results into the ``out_*`` rows (``out_sphere`` from row
     ``sphere_row[o]`` on: its spheres as the particle holds them, a periodic box's beyond it
     included), its footprint and its rectangle; ``settles[0]`` counts the descents.  When
@@ -197,7 +197,7 @@ def settle_rows(first, last, settled_end, index, shape_offsets, shape_radii, sha
         later = max(settled_end, o + 1)
         while True:
             settles[0] += 1
-            n, state, n_c, steps, chunks, buf = _settle(index[o], shape_offsets, shape_radii, shape_start,
+            n, state, n_c, steps, chunks, buf = _settle(o, shape_offsets, shape_radii, shape_start,
                                                         particle_shape, particle_scale, particle_rotation,
                                                         particle_drop_xy, sediment, grid, ell, particle, work,
                                                         history, settings, out_events[o], trace, buf, periodic,
