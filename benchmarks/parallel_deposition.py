@@ -16,7 +16,9 @@ sediment first, then deposits the big one.  Rank 0 prints one row:
 * ``MB/rank``: the largest peak resident memory of a rank during the deposition, above what it held
   before (its own particles' inputs included; the serial run holds all of them);
 * ``settle``: the share of the slowest rank's time spent settling particles; the rest is waiting
-  and communicating.
+  and communicating;
+* ``survey``: the seconds every rank spends drawing and reading all the particles' inputs (twice:
+  to survey them, then to keep its own), included in ``seconds``: work that does not shrink with K.
 
 With ``--model``, rank 0 also measures the MPI latency and bandwidth of this machine (a ping-pong
 between ranks 0 and 1) and projects the speedup on ``K`` cores of one node from the counts:
@@ -107,7 +109,8 @@ def main():
     parser.add_argument("--box", type=float, default=300.0)
     parser.add_argument("--serial-seconds", type=float, default=None)
     parser.add_argument("--model", action="store_true")
-    parser.add_argument("--window", type=int, default=None, help="drop indices per rank in a round")
+    parser.add_argument("--window", type=int, default=None,
+                        help="drop indices per rank in a round (default: deposit_streamed's)")
     parser.add_argument("--halo", type=float, default=None, help="halo in diameters (default: deposit_streamed's)")
     options = parser.parse_args()
     comm = MPI.COMM_WORLD
@@ -138,10 +141,11 @@ def main():
         messages = rounds * (2 * (ranks - 1) + math.ceil(math.log2(ranks))) * ranks if ranks > 1 else 0
         slowest = max(tallies, key=lambda t: t["settle_seconds"])
         print(f"{'ranks':>5} {'spheres':>9} {'seconds':>8} {'serial s':>8} {'speedup':>7} {'settled twice':>13} "
-              f"{'rounds':>6} {'bytes/p':>7} {'msgs/p':>6} {'MB/rank':>7} {'settle':>6}")
+              f"{'rounds':>6} {'bytes/p':>7} {'msgs/p':>6} {'MB/rank':>7} {'settle':>6} {'survey':>6}")
         print(f"{ranks:>5} {n:>9} {seconds:>8.2f} {serial if serial else float('nan'):>8.2f} "
               f"{(serial / seconds) if serial else float('nan'):>7.2f} {settles / n - 1:>13.2e} {rounds:>6} "
-              f"{sent / n:>7.1f} {messages / n:>6.3f} {memory:>7.0f} {slowest['settle_seconds'] / seconds:>6.2f}",
+              f"{sent / n:>7.1f} {messages / n:>6.3f} {memory:>7.0f} {slowest['settle_seconds'] / seconds:>6.2f} "
+              f"{max(t['survey_seconds'] for t in tallies):>6.2f}",
               flush=True)
     if options.model and ranks >= 2:
         latency = ping_pong(comm, 8)

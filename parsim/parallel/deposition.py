@@ -35,6 +35,7 @@ the particles being settled by other ranks (checked in 3).  So its descent read 
 descent reads, step by step, and gives the same bits.
 """
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -50,8 +51,11 @@ from parsim.parallel.collective import abort_if_alone
 __all__ = ["BlockLayout", "CellGrowth", "deposit_decomposed", "deposit_streamed", "DecomposedDeposition",
            "DecompositionError", "InvalidDeposition", "default_halo", "drop_order", "spans"]
 
-#: particles per rank in a round's window of drop indices
+#: particles per rank in a round's window of drop indices, on a block of REFERENCE_COLUMNS grid columns;
+#: a smaller block takes a window smaller by the square root of its area (default_window)
 WINDOW_PER_RANK = 512
+REFERENCE_COLUMNS = 45_000  # a block of 150 x 300 sphere diameters
+SMALLEST_WINDOW = 64
 #: rows settled between two tests of whether every rank has settled its window
 AHEAD_ROWS = 8
 
@@ -77,6 +81,20 @@ def default_halo(prep, largest_scale, largest_cell) -> float:
         a, b = prep.shape_start[s], prep.shape_start[s + 1]
         extent = max(extent, float(np.max(np.linalg.norm(prep.shape_offsets[a:b], axis=1) + prep.shape_radii[a:b])))
     return 4.0 * largest_cell + 2.0 * extent * largest_scale
+
+
+def default_window(layout, prep, cell) -> int:
+    """Drop indices per rank in a round: WINDOW_PER_RANK on a block of REFERENCE_COLUMNS columns of side
+    ``cell``, fewer by the square root of a smaller block's area, a power of two, at least SMALLEST_WINDOW.
+    More particles dropped at once on a small block conflict more often: on 2 ranks and 10^6 spheres,
+    128 was the fastest of 64-512 in a box of 100 x 100 diameters (7.2 s against 8.4 s with 512),
+    256 in one of 200 x 200 and 512 in one of 300 x 300 (docs/benchmarks.md)."""
+    width = layout.length / layout.n_blocks
+    depth = float(prep.box_upper_xy[1] - prep.box_lower_xy[1]) if prep.lateral != LATERAL_NONE \
+        else layout.length  # a heap: about as deep as its drop area is wide
+    columns = max(width * depth / cell**2, 1.0)
+    window = WINDOW_PER_RANK * min(1.0, math.sqrt(columns / REFERENCE_COLUMNS))
+    return max(SMALLEST_WINDOW, 1 << int(math.floor(math.log2(max(window, 1.0)))))
 
 
 class CellGrowth:
@@ -209,14 +227,15 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
                      lateral, floor, trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
                      clock_from_particle=-1, wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX,
                      cylinder=None, substrate_positions=None, substrate_radii=None, halo=None,
-                     window_per_rank=WINDOW_PER_RANK, check=False) -> DecomposedDeposition:
+                     window_per_rank=None, check=False) -> DecomposedDeposition:
     """:func:`deposit_decomposed` of particles that no rank holds all of: ``particle_chunks()`` yields
     ``(particle_shape, particle_scale, particle_rotation, particle_drop_xy)`` of consecutive particles in
     drop order, the same on every rank, and starts again from the first at every call (it is called
     twice); each rank keeps the inputs of the particles it owns.  The other arguments are those of
     :func:`parsim.core.sdbd.deposit`, and ``halo`` is how far a rank's region reaches beyond its block
     (default :func:`default_halo`); a box whose blocks would be narrower than the halo is settled
-    whole by rank 0.  ``window_per_rank`` sets the drop indices of a round (that many per rank).
+    whole by rank 0.  ``window_per_rank`` sets the drop indices of a round (that many per rank; default
+    :func:`default_window`).
     ``clocked_seconds`` (of the gathered result) is the wall-clock time from the round in which
     particle ``clock_from_particle`` was committed to the end (NaN when it is -1).
     With ``check``, every particle's owner fingerprints the sediment its descent read when it settles
@@ -224,6 +243,7 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
     settings = dict(trial_angle=trial_angle, cycle_n=cycle_n, cycle_eps=cycle_eps,
                     max_events_per_particle=max_events_per_particle, wall_contact=wall_contact, container=container,
                     cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii)
+    started = time.perf_counter()
     try:
         try:
             survey = _Survey(shape_offsets, shape_radii, shape_start, particle_chunks, box_lower_xy, box_upper_xy,
@@ -240,8 +260,13 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
         if layout.length / layout.n_blocks < halo:  # blocks narrower than the halo: the task runs whole
             layout = BlockLayout(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, survey.drop_x_range, 1, halo)
         own = survey.own_particles(layout, comm.Get_rank())
-        return _RankRun(comm, own, survey, layout, max(1, int(window_per_rank)) * layout.n_blocks, check,
-                        int(clock_from_particle)).run()
+        surveyed = time.perf_counter() - started
+        if window_per_rank is None:
+            window_per_rank = default_window(layout, prep, survey.cells.cell[-1])
+        share = _RankRun(comm, own, survey, layout, max(1, int(window_per_rank)) * layout.n_blocks, check,
+                         int(clock_from_particle)).run()
+        share.tally["survey_seconds"] = surveyed  # reading every particle's inputs, twice, on every rank
+        return share
     except BaseException as error:
         abort_if_alone(comm, error)  # the other ranks would wait in a collective: end them all, with one line
         raise
