@@ -8,6 +8,8 @@ in which a wall holds the touching sphere's centre fixed (``wall_contact = "glue
 available by name.
 """
 
+import re
+
 import numpy as np
 import pytest
 
@@ -121,3 +123,23 @@ def test_the_bulk_of_a_walled_sediment_packs_as_a_periodic_one():
     (periodic, e_periodic), (walls, e_walls) = phi[sdbd.LATERAL_PERIODIC], phi[sdbd.LATERAL_WALLS]
     assert periodic == pytest.approx(0.5813, abs=0.002)
     assert abs(walls - periodic) < 3.0 * np.hypot(e_periodic, e_walls) + 2e-4
+
+
+@pytest.mark.parametrize("cylinder", [None, (5.0, 5.0, 5.0, 48)], ids=["box", "cylinder"])
+def test_the_first_particle_dropped_across_a_wall_is_named(cylinder):
+    """Rods of three spheres dropped at random with room to spare all fit; of two moved across a wall
+    (to x = 0.3, their rods lying along x) the first is named, counted from ``first_particle`` in a chunk."""
+    n = 400
+    rng = np.random.default_rng(5)
+    angle = 2.0 * np.pi * rng.random(n)
+    drop = np.column_stack([5.0 + 2.5 * np.cos(angle), 5.0 + 2.5 * np.sin(angle)])  # 1.25 from the walls at least
+    offsets = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    along_x = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    arguments = [offsets, np.full(3, 0.5), np.array([0, 3]), np.zeros(n, dtype=np.int64), np.ones(n), along_x, drop,
+                 (0.0, 0.0), (10.0, 10.0), sdbd.LATERAL_WALLS, sdbd.FLOOR_ROLL]
+    options = {} if cylinder is None else {"container": sdbd.CONTAINER_CYLINDER, "cylinder": cylinder}
+    sdbd.prepare_deposition(*arguments, **options)
+    drop[[250, 37]] = (0.3, 5.0)  # both cross the wall: the first in the drop order is named
+    message = "particle 137: dropped at (0.3, 5.0), it does not fit inside the walls"
+    with pytest.raises(ValueError, match=re.escape(message)):
+        sdbd.prepare_deposition(*arguments, **options, first_particle=100)

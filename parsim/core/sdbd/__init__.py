@@ -368,7 +368,6 @@ def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, 
     """The arguments of :func:`deposit` validated (a ValueError names the first bad one) as a
     :class:`PreparedDeposition`; ``first_particle`` is the first particle's place in the drop order
     when these are a chunk of a longer run (the errors name particles by it)."""
-    from parsim.core.sdbd.rotation import quat_to_matrix
 
     offsets = np.ascontiguousarray(shape_offsets, dtype=np.float64)
     radii = np.ascontiguousarray(shape_radii, dtype=np.float64)
@@ -440,21 +439,11 @@ def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, 
     r_sub = float(np.max(sub_rad)) if len(sub_rad) else 0.0
     if lateral == LATERAL_WALLS and P:
         # the caller guarantees that each particle starts inside; check it
-        matrix = np.empty((3, 3))
-        for p in range(P):
-            s = pshape[p]
-            o = pscale[p] * offsets[start[s]:start[s + 1]]
-            r = pscale[p] * radii[start[s]:start[s + 1]]
-            quat_to_matrix(prot[p] / np.linalg.norm(prot[p]), matrix)
-            xy = pxy[p] + o @ matrix[:2, :].T
-            tol = 1e-9 * ell
-            if polygon is not None:
-                outside = np.any(_outside_polygon(xy, r, polygon, n_sides, tol))
-            else:
-                outside = np.any(xy - r[:, None] < lo - tol) or np.any(xy + r[:, None] > hi + tol)
-            if outside:
-                raise ValueError(f"particle {first_particle + p}: dropped at {tuple(pxy[p])}, it does not fit "
-                                 "inside the walls")
+        outside = _first_outside_walls(offsets, radii, start, pshape, pscale, prot, pxy, lo, hi, polygon, n_sides,
+                                       1e-9 * ell)
+        if outside >= 0:
+            raise ValueError(f"particle {first_particle + outside}: dropped at {tuple(pxy[outside].tolist())}, it "
+                             "does not fit inside the walls")
     if lateral == LATERAL_NONE:
         lo = np.zeros(2)
         hi = np.zeros(2)
@@ -558,6 +547,37 @@ def _cylinder(container, cylinder, lateral, lo, hi, r_max):
                          f"[cy - radius, cy + radius] = {tuple(square_lo)} - {tuple(square_hi)}, "
                          f"got {tuple(lo)} - {tuple(hi)}")
     return polygon_geometry(cx, cy, radius, int(n_sides)), int(n_sides), square_lo, square_hi
+
+
+#: particle spheres placed at once by the check that particles start inside the walls (bounds its memory)
+FIT_CHECK_SPHERES = 1 << 18
+
+
+def _first_outside_walls(offsets, radii, start, pshape, pscale, prot, pxy, lo, hi, polygon, n_sides, tol):
+    """The first particle with a sphere outside the walls (the box or the cylinder's polygon) by more
+    than ``tol`` at its drop point, or -1: the particles of each shape placed together, a batch at a time."""
+    from parsim.core.structure import rotation_matrices
+
+    first = len(pshape)
+    for s in range(len(start) - 1):
+        o, r = offsets[start[s]:start[s + 1]], radii[start[s]:start[s + 1]]
+        particles = np.flatnonzero(pshape == s)
+        batch = max(1, FIT_CHECK_SPHERES // len(r))
+        for chosen in np.split(particles, np.arange(batch, len(particles), batch)):
+            scale = pscale[chosen]
+            # sphere k of particle p at pxy[p] + scale[p] (R(q_p) o_k)_xy, radius scale[p] r_k
+            xy = pxy[chosen, None, :] + scale[:, None, None] * np.einsum("pij,kj->pki",
+                                                                          rotation_matrices(prot[chosen])[:, :2], o)
+            reach = scale[:, None] * r[None, :]
+            if polygon is not None:
+                out = _outside_polygon(xy.reshape(-1, 2), reach.ravel(), polygon, n_sides, tol).reshape(reach.shape)
+            else:
+                out = (xy - reach[..., None] < lo - tol) | (xy + reach[..., None] > hi + tol)
+            bad = chosen[np.any(out.reshape(len(chosen), -1), axis=1)]
+            if len(bad):
+                first = min(first, int(bad[0]))
+                break
+    return first if first < len(pshape) else -1
 
 
 def _outside_polygon(xy, r, polygon, n_sides, tol):
