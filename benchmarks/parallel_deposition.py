@@ -17,8 +17,9 @@ sediment first, then deposits the big one.  Rank 0 prints one row:
   before (its own particles' inputs included; the serial run holds all of them);
 * ``settle``: the share of the slowest rank's time spent settling particles; the rest is waiting
   and communicating;
-* ``survey``: the seconds every rank spends drawing and reading all the particles' inputs (twice:
-  to survey them, then to keep its own), included in ``seconds``: work that does not shrink with K.
+* ``survey``: the seconds every rank spends drawing and reading all the particles' inputs (to
+  validate them, survey them and keep its own), included in ``seconds``: work that does not shrink
+  with K.
 
 With ``--model``, rank 0 also measures the MPI latency and bandwidth of this machine (a ping-pong
 between ranks 0 and 1) and projects the speedup on ``K`` cores of one node from the counts:

@@ -21,9 +21,10 @@ particle before it is committed, on every rank):
    sphere centres, and inserts those it receives; they withdraw the present particles they touch.
 
 What a rank holds: the inputs of its own particles alone (:func:`deposit_streamed` reads the
-particles in chunks, twice: once to validate them and survey what the decomposition needs of all,
-once to keep its own), their settled spheres, and the committed spheres of the others in its
-region; so about N/K of the sediment and a border.
+particles in chunks, validates them, surveys what the decomposition needs of all and keeps its own;
+a heap, whose blocks depend on its drop points, or a box too narrow to split needs a second
+reading), their settled spheres, and the committed spheres of the others in its region; so about
+N/K of the sediment and a border.
 
 Why it is the serial sediment: a descent reads only sediment spheres in grid cells that meet its
 rectangle, and the grid's lists hold them in the serial order (keys).  A particle committed at
@@ -231,7 +232,8 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
     """:func:`deposit_decomposed` of particles that no rank holds all of: ``particle_chunks()`` yields
     ``(particle_shape, particle_scale, particle_rotation, particle_drop_xy)`` of consecutive particles in
     drop order, the same on every rank, and starts again from the first at every call (it is called
-    twice); each rank keeps the inputs of the particles it owns.  The other arguments are those of
+    once, twice for a heap or a box too narrow to split); each rank keeps the inputs of the particles
+    it owns.  The other arguments are those of
     :func:`parsim.core.sdbd.deposit`, and ``halo`` is how far a rank's region reaches beyond its block
     (default :func:`default_halo`); a box whose blocks would be narrower than the halo is settled
     whole by rank 0.  ``window_per_rank`` sets the drop indices of a round (that many per rank; default
@@ -247,7 +249,7 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
     try:
         try:
             survey = _Survey(shape_offsets, shape_radii, shape_start, particle_chunks, box_lower_xy, box_upper_xy,
-                             lateral, floor, settings)
+                             lateral, floor, settings, comm.Get_size(), comm.Get_rank())
             halo = default_halo(survey.prep, survey.largest_scale, survey.cells.cell[-1]) if halo is None \
                 else float(halo)
             if not (np.isfinite(halo) and halo > 0):
@@ -265,7 +267,7 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
             window_per_rank = default_window(layout, prep, survey.cells.cell[-1])
         share = _RankRun(comm, own, survey, layout, max(1, int(window_per_rank)) * layout.n_blocks, check,
                          int(clock_from_particle)).run()
-        share.tally["survey_seconds"] = surveyed  # reading every particle's inputs, twice, on every rank
+        share.tally["survey_seconds"] = surveyed  # reading every particle's inputs, on every rank
         return share
     except BaseException as error:
         abort_if_alone(comm, error)  # the other ranks would wait in a collective: end them all, with one line
@@ -275,20 +277,23 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
 class _Survey:
     """A first pass over the particles, chunk by chunk: each chunk validated as :func:`parsim.core.sdbd.deposit`
     validates its arguments, and what the decomposition needs of all of them (their number and
-    spheres, the range of drop points, the largest size factor, the growth of the grid's cell)."""
+    spheres, the range of drop points, the largest size factor, the growth of the grid's cell).
+    In a box or a cylinder, whose blocks do not depend on the particles, it also keeps the particles
+    of ``rank``'s block among ``n_blocks``, so that a second pass is needed only for a heap or a box
+    too narrow to split."""
 
     def __init__(self, shape_offsets, shape_radii, shape_start, particle_chunks, box_lower_xy, box_upper_xy,
-                 lateral, floor, settings):
+                 lateral, floor, settings, n_blocks, rank):
         self.shapes = (shape_offsets, shape_radii, shape_start)
         self.container = (box_lower_xy, box_upper_xy, lateral, floor)
         self.settings = settings
         self.particle_chunks = particle_chunks
-        self.prep, self.cells = None, None
+        self.prep, self.cells, self.kept = None, None, None
         self.n_particles = self.n_spheres = 0
         self.largest_scale = 0.0
         self.drop_x_range = (np.inf, -np.inf)
         for chunk in self._prepared_chunks():
-            self._add(chunk)
+            self._add(chunk, n_blocks, rank)
         if self.prep is None:  # no particle at all: deposit's own checks and error
             self.prep = sdbd.prepare_deposition(*self.shapes, np.zeros(0, dtype=np.int64), np.zeros(0),
                                                 np.zeros((0, 4)), np.zeros((0, 2)), *self.container, **settings)
@@ -303,11 +308,16 @@ class _Survey:
             yield chunk
             first += len(chunk.particle_shape)
 
-    def _add(self, chunk) -> None:
+    def _add(self, chunk, n_blocks, rank) -> None:
         if not len(chunk.particle_shape):
             return
         if self.prep is None:  # the first particle sets the grid's first cell
             self.prep, self.cells = chunk, CellGrowth(chunk.first_cell)
+            if chunk.lateral != LATERAL_NONE:  # the blocks' edges need no halo and no particle
+                self.kept = _Keeping(BlockLayout(chunk.lateral, chunk.box_lower_xy, chunk.box_upper_xy,
+                                                 (0.0, 0.0), n_blocks, 1.0), rank, len(chunk.substrate_radii))
+        if self.kept is not None:
+            self.kept.add(chunk, self.n_particles, self.n_spheres)
         self.cells.add(chunk)
         self.n_particles += len(chunk.particle_shape)
         self.n_spheres += chunk.n_spheres
@@ -316,24 +326,45 @@ class _Survey:
         self.drop_x_range = (min(self.drop_x_range[0], float(x.min())), max(self.drop_x_range[1], float(x.max())))
 
     def own_particles(self, layout, rank) -> "_OwnParticles":
-        """A second pass: the particles dropped in ``rank``'s block, their inputs and their first sphere key."""
-        kept, index, first_key = [], [], []
-        first = spheres = 0
-        n_substrate = len(self.prep.substrate_radii)
-        for chunk in self._prepared_chunks():
-            counts = np.diff(chunk.shape_start)[chunk.particle_shape]
-            mine = np.flatnonzero(layout.owners(chunk.particle_drop_xy[:, 0]) == rank)
-            kept.append(tuple(array[mine] for array in chunk.kernel_inputs()[3:]))
-            index.append(first + mine)
-            first_key.append(n_substrate + spheres + (np.cumsum(counts) - counts)[mine])
-            first += len(counts)
-            spheres += int(counts.sum())
-        columns = [np.concatenate([part[k] for part in kept]) for k in range(4)] if kept else \
-            [array for array in self.prep.kernel_inputs()[3:]]
-        prep = self.prep._replace(particle_shape=columns[0], particle_scale=columns[1], particle_rotation=columns[2],
-                                  particle_drop_xy=columns[3], n_spheres=self.n_spheres)
-        return _OwnParticles(prep, np.concatenate(index + [np.zeros(0, dtype=np.int64)]),
-                             np.concatenate(first_key + [np.zeros(0, dtype=np.int64)]))
+        """The particles dropped in ``rank``'s block of ``layout``: those kept by the survey if its blocks are
+        these, else from a second pass."""
+        kept = self.kept
+        if kept is None or kept.layout.n_blocks != layout.n_blocks:
+            kept = _Keeping(layout, rank, len(self.prep.substrate_radii))
+            particles = spheres = 0
+            for chunk in self._prepared_chunks() if rank < layout.n_blocks else ():  # a rank beyond owns none
+                kept.add(chunk, particles, spheres)
+                particles += len(chunk.particle_shape)
+                spheres += chunk.n_spheres
+        self.kept = None
+        return kept.own(self.prep, self.n_spheres)
+
+
+class _Keeping:
+    """The particles of one rank's block gathered from the chunks: their inputs, their places in the drop
+    order and their first sphere keys."""
+
+    def __init__(self, layout, rank, n_substrate):
+        self.layout, self.rank, self.n_substrate = layout, rank, n_substrate
+        self.inputs, self.index, self.first_key = [], [], []
+
+    def add(self, chunk, particles_before, spheres_before) -> None:
+        """The particles of ``chunk`` (a prepared chunk) that this rank owns; ``particles_before`` and
+        ``spheres_before`` came in the chunks before it."""
+        counts = np.diff(chunk.shape_start)[chunk.particle_shape]
+        mine = np.flatnonzero(self.layout.owners(chunk.particle_drop_xy[:, 0]) == self.rank)
+        self.inputs.append(tuple(array[mine] for array in chunk.kernel_inputs()[3:]))
+        self.index.append(particles_before + mine)
+        self.first_key.append(self.n_substrate + spheres_before + (np.cumsum(counts) - counts)[mine])
+
+    def own(self, prep, n_spheres) -> "_OwnParticles":
+        """The rank's particles, their inputs in ``prep`` (of the whole run's ``n_spheres``)."""
+        columns = ([np.concatenate([part[k] for part in self.inputs]) for k in range(4)] if self.inputs
+                   else list(prep.kernel_inputs()[3:]))
+        own_prep = prep._replace(particle_shape=columns[0], particle_scale=columns[1], particle_rotation=columns[2],
+                                 particle_drop_xy=columns[3], n_spheres=n_spheres)
+        return _OwnParticles(own_prep, np.concatenate(self.index + [np.zeros(0, dtype=np.int64)]),
+                             np.concatenate(self.first_key + [np.zeros(0, dtype=np.int64)]))
 
 
 @dataclass
