@@ -133,10 +133,17 @@ def angle_distribution(axes, bins):
     Isotropic axes cover the unit sphere uniformly, whose area element is sin θ dθ dφ, so they give
     p(θ) = sin θ.
     """
+    edges, counts = angle_histogram(axes, bins)
+    return edges, counts / np.diff(edges) / counts.sum()  # numpy's density, from the counts
+
+
+def angle_histogram(axes, bins):
+    """The counts of :func:`angle_distribution`'s bins: (edges, counts), so that the counts of parts of a
+    set of axes add up to the whole set's."""
     u = _as_unit_vectors(axes)
     theta = np.arccos(np.minimum(np.abs(u[:, 2]), 1.0))
-    density, edges = np.histogram(theta, bins=bins, range=(0.0, 0.5 * np.pi), density=True)
-    return edges, density
+    counts, edges = np.histogram(theta, bins=bins, range=(0.0, 0.5 * np.pi))
+    return edges, counts
 
 
 def radial_distribution(centres, box_lower_xy, box_upper_xy, periodic, z_low, z_high, r_max, bins,
@@ -186,7 +193,7 @@ def region_radial_distribution(centres, in_region, region_volume, reference, r_m
         raise ValueError(f"r_max = {r_max} exceeds half the periodic box width {upper - lower}")
     reference = np.asarray(reference, dtype=np.int64)
     if max_references is not None and len(reference) > max_references:
-        reference = reference[np.linspace(0, len(reference) - 1, max_references).astype(np.int64)]
+        reference = reference[evenly_spaced(len(reference), max_references)]
     edges = np.linspace(0.0, r_max, bins + 1)
     r = 0.5 * (edges[1:] + edges[:-1])
     if len(reference) == 0:
@@ -204,6 +211,12 @@ def region_radial_distribution(centres, in_region, region_volume, reference, r_m
     density = np.count_nonzero(in_region) / region_volume
     shell = 4.0 / 3.0 * np.pi * (edges[1:] ** 3 - edges[:-1] ** 3)
     return r, counts / (len(reference) * density * shell), len(reference)
+
+
+def evenly_spaced(n, most):
+    """The places of ``most`` entries spread evenly over a list of ``n`` (first and last included): the
+    reference centres g(r) keeps of more than it needs."""
+    return np.linspace(0, n - 1, most).astype(np.int64)
 
 
 def contact_pairs(positions, radii, particle, box_lower_xy, box_upper_xy, periodic):

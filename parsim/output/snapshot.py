@@ -135,8 +135,9 @@ def _write_joined_task_file(path: Path, result: TaskResult, attrs: dict, comm) -
     layouts = comm.gather({name: (array.shape, array.dtype.str) for name, array in rows.items()}, root=0)
     if comm.Get_rank() != 0:
         return
+    current = {_part_name(rank) for rank in range(len(layouts))}
     for stale in folder.glob(f"rank*{Path(_part_name(0)).suffix}"):  # of an earlier run on more ranks
-        if stale.name not in {_part_name(rank) for rank in range(len(layouts))}:
+        if stale.name not in current:
             stale.unlink(missing_ok=True)
 
     def write_array(file, name, array):

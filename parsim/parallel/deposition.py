@@ -411,7 +411,6 @@ class _RankRun:
         self.n_max = int(np.max(np.diff(prep.shape_start)))
         self.cells = survey.cells
         self.growth = self.cells.growth()
-        self.growth_set = set(self.growth.tolist())
         self.settled_end = 0
         self.fetched = set()
         self.column_sides = {}
@@ -562,29 +561,24 @@ class _RankRun:
     def _ahead_end(self, frontier, end, n_particles):
         """The row after the last one that may be settled ahead of the window: one window further, and
         never past a growth of the grid's cell."""
-        if end == frontier + 1 and frontier in self.growth_set:
+        if end == frontier + 1 and _holds(self.growth, frontier):
             return np.searchsorted(self.index, end)
-        ahead = min(end + self.window, n_particles)
-        later = self.growth[np.searchsorted(self.growth, frontier, side="right"):]
-        if len(later):
-            ahead = min(ahead, int(later[0]))
-        return int(np.searchsorted(self.index, ahead))
+        return int(np.searchsorted(self.index, min(end + self.window, self._next_growth(frontier, n_particles))))
 
     def _window_end(self, frontier, n_particles):
         """A window never spans a growth of the grid's cell: a particle larger than all before is
         settled alone, and the ranks rebuild their grids after it."""
-        at = np.searchsorted(self.growth, frontier)
-        if at < len(self.growth) and self.growth[at] == frontier:
+        if _holds(self.growth, frontier):
             return frontier + 1
-        end = min(frontier + self.window, n_particles)
-        later = self.growth[np.searchsorted(self.growth, frontier, side="right"):]
-        if len(later):
-            end = min(end, int(later[0]))
-        return end
+        return min(frontier + self.window, self._next_growth(frontier, n_particles))
+
+    def _next_growth(self, particle, n_particles):
+        """The first particle after ``particle`` that grows the grid's cell (``n_particles`` if none)."""
+        at = np.searchsorted(self.growth, particle, side="right")
+        return int(self.growth[at]) if at < len(self.growth) else n_particles
 
     def _owns(self, particle):
-        row = np.searchsorted(self.index, particle)
-        return row < len(self.index) and self.index[row] == particle
+        return _holds(self.index, particle)
 
     def _row(self, particle):
         return int(np.searchsorted(self.index, particle))
@@ -726,6 +720,12 @@ class _RankRun:
                                     self.com[rows], self.rot[rows], self.contacts[rows], self.state[rows],
                                     self.events[rows], self.steps[rows], self.count[rows], self.spheres[spheres],
                                     self.radius[slots], stopped_at, clocked_seconds, tally)
+
+
+def _holds(ascending, value) -> bool:
+    """Whether the ascending array ``ascending`` holds ``value``."""
+    at = np.searchsorted(ascending, value)
+    return bool(at < len(ascending) and ascending[at] == value)
 
 
 def _box_within(box, extent, length, periodic):

@@ -493,9 +493,8 @@ def _axis_sums(sediment, in_bulk) -> dict:
     if not len(axes):
         return {"axes": 0, "moment": np.zeros((3, 3)), "p2": 0.0, "angles": np.zeros(bins, dtype=np.int64)}
     unit = axes / np.linalg.norm(axes, axis=1)[:, None]
-    edges, density = structure.angle_distribution(axes, bins)
     return {"axes": len(axes), "moment": unit.T @ unit, "p2": structure.vertical_order(axes) * len(axes),
-            "angles": np.rint(density * np.diff(edges) * len(axes)).astype(np.int64)}
+            "angles": structure.angle_histogram(axes, bins)[1].astype(np.int64)}
 
 
 def _partial_sums(comm, sediment, share, skip) -> dict:
