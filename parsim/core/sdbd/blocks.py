@@ -45,6 +45,7 @@ from parsim.core.sdbd.engine import _descend, _search_margin, join_sediment, lar
 from parsim.core.sdbd.grid import grid_collect_growing, grid_insert_ordered, grid_remove, wrap_position
 from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.rotation import matrix_to_quat
+from parsim.core.sdbd.strips import mark_strips, meets_strips
 
 __all__ = ["ABSENT", "PRESENT", "STOPPED", "FINAL", "WITHDRAWN", "settle_rows", "first_failure", "insert_committed",
            "withdraw", "grid_with_cell", "lay_substrate", "read_signature", "first_changed", "drop_top",
@@ -146,23 +147,32 @@ def insert_committed(n_particles, particle_count, particle_footprint, sphere_key
                      rectangle, slot, count, margin):
     """Committed particles of other ranks join the local sediment in slots from ``first_slot`` on:
     particle ``k`` has ``particle_count[k]`` spheres (keys, wrapped centres, radii in the next rows
-    of ``sphere_*``) and footprint ``particle_footprint[k]``.  Each first withdraws the present
-    rows in ``first_row .. last_row - 1`` whose rectangle it meets.  Returns the grid's arrays."""
+    of ``sphere_*``) and footprint ``particle_footprint[k]``.  The present or stopped rows in
+    ``first_row .. last_row - 1`` whose rectangle widened by ``margin`` meets one of the footprints
+    are withdrawn first.  Returns the grid's arrays."""
     geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
-    s = 0
+    periodic = igeom[0] == LATERAL_PERIODIC
+    marked, origin, width = mark_strips(particle_footprint, n_particles, 0.0, geom[2], periodic)
+    for o in range(first_row, last_row):
+        if status[o] != PRESENT and status[o] != STOPPED:
+            continue
+        box = rectangle[o]
+        if not meets_strips(box[0] - margin, box[1] + margin, marked, origin, width, periodic):
+            continue
+        for k in range(n_particles):
+            if box_meets(box, particle_footprint[k], margin, geom[2], geom[3], periodic):
+                withdraw(o, status, slot, count, centre, radius, (geom, igeom, head, col_top, nxt, hkeys, hval,
+                                                                  counts))
+                break
     j = first_slot
-    for k in range(n_particles):
-        _withdraw_met(first_row, last_row, particle_footprint[k], False, status, footprint, rectangle, slot, count,
-                      centre, radius, (geom, igeom, head, col_top, nxt, hkeys, hval, counts), margin)
-        for _ in range(particle_count[k]):
-            for d in range(3):
-                centre[j, d] = sphere_centre[s, d]
-            radius[j] = sphere_radius[s]
-            key[j] = sphere_key[s]
-            head, col_top, hkeys, hval = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts,
-                                                             j, centre[j, 0], centre[j, 1], centre[j, 2], key)
-            s += 1
-            j += 1
+    for s in range(len(sphere_radius)):
+        for d in range(3):
+            centre[j, d] = sphere_centre[s, d]
+        radius[j] = sphere_radius[s]
+        key[j] = sphere_key[s]
+        head, col_top, hkeys, hval = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts,
+                                                         j, centre[j, 0], centre[j, 1], centre[j, 2], key)
+        j += 1
     return geom, igeom, head, col_top, nxt, hkeys, hval, counts
 
 
@@ -315,6 +325,7 @@ def first_failure(first, last, index, status, rectangle, region, other_index, ot
     (``other_index``, ``other_footprint``, sorted by index) has a sphere there, FAIL_STOPPED if it
     stopped at the event limit.  Others' particles dropped before it meet its rectangle only if their
     footprint meets the region: they are all listed."""
+    marked, origin, width = mark_strips(other_footprint, n_other, margin, length_x, periodic)
     start = 0
     for o in range(first, last):
         p = index[o]
@@ -323,9 +334,10 @@ def first_failure(first, last, index, status, rectangle, region, other_index, ot
             return p * N_FAILURES + FAIL_REGION
         while start < n_other and other_index[start] < p:
             start += 1
-        for k in range(start):
-            if box_meets(box, other_footprint[k], margin, length_x, length_y, periodic):
-                return p * N_FAILURES + FAIL_CONFLICT
+        if start > 0 and meets_strips(box[0], box[1], marked, origin, width, periodic):
+            for k in range(start):
+                if box_meets(box, other_footprint[k], margin, length_x, length_y, periodic):
+                    return p * N_FAILURES + FAIL_CONFLICT
         if status[o] == STOPPED:
             return p * N_FAILURES + FAIL_STOPPED
     return -1
