@@ -33,14 +33,20 @@ the serial seconds per particle and ``python`` the measured seconds per round ou
 
 import argparse
 import math
+import os
+import sys
 import time
 
 import numpy as np
 from mpi4py import MPI
 
-from parsim.core import sdbd
-from parsim.core.shapes import random_rotations, sphere
-from parsim.parallel.deposition import deposit_streamed
+if __package__ in (None, ""):  # run as a script from a source tree
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), os.pardir))
+
+from benchmarks.mpi_timing import latency_and_bandwidth  # noqa: E402
+from parsim.core import sdbd  # noqa: E402
+from parsim.core.shapes import random_rotations, sphere  # noqa: E402
+from parsim.parallel.deposition import deposit_streamed  # noqa: E402
 
 CHUNK = 1 << 20  # particles drawn at a time
 
@@ -89,21 +95,6 @@ def reset_peak():
         refs.write("5")
 
 
-def ping_pong(comm, size, repeats=200):
-    """Seconds for one message of ``size`` bytes between ranks 0 and 1 (half a round trip)."""
-    data = np.zeros(max(size, 1), dtype=np.uint8)
-    comm.Barrier()
-    start = time.perf_counter()
-    for _ in range(repeats):
-        if comm.rank == 0:
-            comm.Send(data, dest=1)
-            comm.Recv(data, source=1)
-        elif comm.rank == 1:
-            comm.Recv(data, source=0)
-            comm.Send(data, dest=0)
-    return (time.perf_counter() - start) / (2 * repeats)
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--spheres", type=int, default=1_000_000)
@@ -149,8 +140,7 @@ def main():
               f"{max(t['survey_seconds'] for t in tallies):>6.2f}",
               flush=True)
     if options.model and ranks >= 2:
-        latency = ping_pong(comm, 8)
-        bandwidth = 4_000_000 / ping_pong(comm, 4_000_000, repeats=20)
+        latency, bandwidth = latency_and_bandwidth(comm)
         if comm.rank == 0:
             t_particle = serial / n
             python = (seconds - slowest["settle_seconds"]) / rounds

@@ -33,6 +33,7 @@ def assert_same_run(run, reference):
     assert np.array_equal(run["link_steps"], reference["link_steps"])
     assert np.array_equal(run["cluster"], reference["cluster"])
     assert np.array_equal(run["counters"], reference["counters"])
+    assert np.all(run["iterations_per_rank"] == reference["counters"][4])  # every rank iterated alike
     assert np.array_equal(run["cluster_history"], reference["cluster_history"])
     radius = float(reference["radius"])
     assert np.abs(run["positions"] - reference["positions"]).max() <= POSITION_TOLERANCE_RADII * radius

@@ -20,7 +20,10 @@ runs and exchanges nothing.
 import numpy as np
 from mpi4py import MPI
 
+from parsim.core import kernel_mpi
 from parsim.parallel.decomposition import Decomposition, checked_positions
+
+kernel_mpi.bind_library()  # the jitted loops' MPI calls go to the library mpi4py has just loaded
 
 COUNT_TAG = 21
 ROWS_TAG = 22
@@ -78,6 +81,20 @@ class HaloPlan:
             self._buffers[trailing] = self._new_buffers(trailing, np.float64)
         return self._exchange_into(values, *self._buffers[trailing])
 
+    def kernel_halo(self, width: int, tally=None) -> tuple:
+        """This plan as a halo of :mod:`parsim.core.kernel_mpi`, for exchanges from jitted loops:
+        rows of up to ``width`` floats; what they send is added to ``tally`` (``N_TALLIES`` floats)."""
+        comm = self.decomposition.comm
+        send_counts = np.array([len(rows) for rows in self.send_indices], dtype=np.int64)
+        rows = np.concatenate([np.asarray(r, dtype=np.int64) for r in self.send_indices] + [np.zeros(0, np.int64)])
+        n_requests = max(2 * len(self.decomposition.neighbours), 1)
+        request_dtype = np.int32 if MPI._sizeof(MPI.Request) == 4 else np.int64
+        return (_handle(comm), np.int64(comm.Get_size()), np.asarray(self.decomposition.neighbours, dtype=np.int32),
+                rows, _offsets(send_counts), _offsets(self.ghost_counts), np.zeros(len(rows) * width),
+                np.zeros(self.n_ghost * width), np.zeros(n_requests, dtype=request_dtype),
+                np.zeros(n_requests * kernel_mpi.STATUS_INTS, dtype=np.int32), _handle(MPI.DOUBLE), _handle(MPI.MAX),
+                np.zeros(kernel_mpi.N_TALLIES) if tally is None else tally)
+
     def _new_buffers(self, trailing: tuple, dtype) -> tuple[np.ndarray, np.ndarray]:
         """Send buffer (rows for all neighbours, back to back) and receive buffer (the ghosts)."""
         n_send = sum(len(rows) for rows in self.send_indices)
@@ -134,6 +151,17 @@ def _checked_width(decomposition: Decomposition, width) -> float:
         raise ValueError(f"width: must be > 0 and at most the narrowest rank slab ({narrowest:g}, ghosts come "
                          f"only from adjacent ranks), got {width:g}")
     return width
+
+
+def _handle(mpi_object) -> np.int64:
+    """The library's handle of ``mpi_object`` as a signed 64-bit integer (mpi4py gives it unsigned)."""
+    value = MPI._handleof(mpi_object)
+    return np.int64(value - (1 << 64) if value >= (1 << 63) else value)
+
+
+def _offsets(counts) -> np.ndarray:
+    """``[0, c0, c0 + c1, ...]``: where each neighbour's rows start, and the end."""
+    return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
 def _consecutive_slices(counts: np.ndarray) -> list[slice]:

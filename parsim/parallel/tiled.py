@@ -16,7 +16,9 @@ is given a :class:`DecomposedDomain` (the interface is in :mod:`parsim.core.ts.d
   ``REBALANCE_ABOVE`` (max / mean) the tile blocks are first moved to even them out;
 - the halos of contact searches, quiet-step bounds and minimisations are
   :class:`parsim.parallel.halo.HaloPlan` s; in a minimisation every DAHA iteration refreshes
-  the ghost rows (positions, and the sleeping flags) through :class:`_ProblemExchange`;
+  the ghost rows (positions, and the sleeping flags): the iterations between two checks from
+  inside the jitted loop (:mod:`parsim.core.kernel_mpi`), the others through
+  :class:`_ProblemExchange`;
 - the radii, masses, cluster labels and links are known on every rank: new links are
   gathered on all ranks each time step (a few per sphere over a whole run), so the cluster
   relabelling is the same deterministic union-find everywhere, and each merged cluster's
@@ -34,6 +36,7 @@ from collections import defaultdict
 import numpy as np
 from mpi4py import MPI
 
+from parsim.core import kernel_mpi
 from parsim.parallel.decomposition import Decomposition
 from parsim.parallel.halo import HaloPlan
 from parsim.parallel.migration import migrate
@@ -57,6 +60,19 @@ class Traffic:
         self.calls = defaultdict(int)
         self.bytes = defaultdict(int)
         self.seconds = defaultdict(float)
+        self.kernel = np.zeros(kernel_mpi.N_TALLIES)  # what the jitted iterations sent (kernel_mpi)
+
+    def totals(self):
+        """``calls``, ``bytes`` and ``seconds`` per kind, the jitted iterations' included: their
+        ghost rows as ``halo``, their maxima as ``reduction``; ``calls`` counts the calls made from
+        Python only."""
+        calls, nbytes, seconds = dict(self.calls), dict(self.bytes), dict(self.seconds)
+        tally = self.kernel
+        nbytes["halo"] = nbytes.get("halo", 0) + int(tally[kernel_mpi.BYTES])
+        nbytes["reduction"] = nbytes.get("reduction", 0) + 8 * int(tally[kernel_mpi.REDUCTIONS])
+        seconds["halo"] = seconds.get("halo", 0.0) + float(tally[kernel_mpi.HALO_SECONDS])
+        seconds["reduction"] = seconds.get("reduction", 0.0) + float(tally[kernel_mpi.REDUCTION_SECONDS])
+        return calls, nbytes, seconds
 
     def add(self, kind, nbytes, started):
         self.calls[kind] += 1
@@ -91,6 +107,10 @@ class _ProblemExchange:
         self.first_ghost = first_ghost
         self.margin = margin
         self.active = domain.size > 1
+        if self.active:
+            self.kernel_halo = halo.plan.kernel_halo(domain.dimension, domain.traffic.kernel)
+        else:
+            self.kernel_halo = kernel_mpi.no_halo()
 
     def share(self, values):
         if not self.active:

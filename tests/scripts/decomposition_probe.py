@@ -20,6 +20,7 @@ import traceback
 import numpy as np
 from mpi4py import MPI
 
+from parsim.core import kernel_mpi
 from parsim.parallel.decomposition import Decomposition
 from parsim.parallel.halo import HaloPlan
 from parsim.parallel.migration import migrate
@@ -180,7 +181,25 @@ def check_halo(decomposition, world, positions, ids, records, width) -> int:
         assert ghosts is first, "exchange allocated a new buffer"
         assert np.array_equal(ghosts, global_positions[expected])
     assert np.array_equal(plan.exchange(records["mass"]), world["mass"][expected])
+    check_kernel_halo(decomposition, plan, owned_positions, ids, global_positions[expected], world["id"][expected])
     return plan.n_ghost
+
+
+def check_kernel_halo(decomposition, plan, owned_positions, owned_ids, ghost_positions, ghost_ids):
+    """The jitted exchange (parsim.core.kernel_mpi) fills the ghost rows as the brute-force search
+    expects, flags included, and its global maximum is the ranks' maximum."""
+    n_owned, dimension = owned_positions.shape
+    halo = plan.kernel_halo(dimension)
+    rows = np.vstack([owned_positions, np.full((plan.n_ghost, dimension), np.nan)])
+    kernel_mpi.share_rows(rows, n_owned, halo)
+    assert np.array_equal(rows[:n_owned], owned_positions) and np.array_equal(rows[n_owned:], ghost_positions)
+    flags = np.concatenate([owned_ids % 3 == 0, np.zeros(plan.n_ghost, dtype=bool)])
+    kernel_mpi.share_flags(flags, n_owned, halo)
+    assert np.array_equal(flags[n_owned:], ghost_ids % 3 == 0)
+    size = decomposition.comm.Get_size()
+    assert kernel_mpi.global_max(float(decomposition.rank), halo) == size - 1
+    sending = sum(len(rows) > 0 for rows in plan.send_indices) if size > 1 else 0
+    assert halo[-1][kernel_mpi.MESSAGES] == 2 * sending, (halo[-1], sending)
 
 
 def main(out: str, dimension: int) -> None:

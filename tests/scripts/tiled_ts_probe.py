@@ -39,13 +39,15 @@ def main(out, n, volume_fraction, seed=3, dimension=2):
     comm = MPI.COMM_WORLD
     result = simulate_ts(x, v, r, m, L, time_step_factor=TIME_STEP_FACTOR,
                          domain=DecomposedDomain(comm, L, dimension))
+    iterations_per_rank = comm.gather(result.n_iterations, root=0)  # one convergence schedule for all
     if comm.Get_rank() == 0:
         order = np.lexsort((result.links[:, 1], result.links[:, 0]))
         np.savez(out, positions=result.positions, velocities=result.velocities, cluster=result.cluster,
                  links=result.links[order], link_steps=result.link_steps[order], time=result.time,
                  counters=np.array([result.n_steps, result.n_collisions, result.n_wall_reflections,
                                     result.n_minimisations, result.n_iterations]),
-                 cluster_history=result.cluster_history, imbalance=result.imbalance, radius=RADIUS)
+                 cluster_history=result.cluster_history, imbalance=result.imbalance, radius=RADIUS,
+                 iterations_per_rank=np.array(iterations_per_rank))
 
 
 if __name__ == "__main__":

@@ -1,0 +1,185 @@
+"""MPI called from inside jitted kernels: ghost rows and a global maximum without leaving numba.
+
+An iterative solver that leaves its jitted loop at every iteration to exchange ghost rows from
+Python pays the interpreter and mpi4py's object layer thousands of times per solve.  Here the
+loop calls the MPI library itself: the functions are declared to numba by their C names
+(:class:`numba.types.ExternalFunction`) and every handle (communicator, datatype, operation) is
+an argument, so the compiled kernels hold no address of this process and stay in numba's
+on-disk cache.  Handles are 64-bit integers (MPICH's are 32-bit ints, Open MPI's pointers:
+either fits); requests have the library's own size.
+
+This module does not import mpi4py.  The names resolve to the MPI library that mpi4py mapped
+into the process (:func:`bind_library`, which the parallel layer calls once it has imported
+mpi4py); until then, and in a process without MPI, to stand-ins that fail (return -1), which the
+kernels turn into an error.  A kernel first run in a process without the library keeps the
+stand-ins for that process.
+
+A *halo* tuple describes one rank's ghost exchange: communicator, size, the neighbours' ranks,
+which owned rows go to each (back to back, delimited by ``send_ptr``), how many ghost rows come
+from each (``recv_ptr``, stored from the first ghost row on), buffers, requests and statuses,
+the handles of MPI_DOUBLE and MPI_MAX, and a tally of what was sent
+(:func:`parsim.parallel.halo.HaloPlan.kernel_halo` builds it).  :func:`no_halo` is the
+one-process halo: the kernels then make no MPI call at all.
+"""
+
+import ctypes
+
+import numpy as np
+from llvmlite import binding as llvm
+from numba import types
+
+from parsim.core.jit import jit
+
+#: Tag of the ghost rows exchanged from kernels.
+ROWS_TAG = 31
+
+#: Entries of a halo's tally: messages and bytes sent, seconds waiting on ghost rows and on
+#: reductions, reductions made.
+MESSAGES, BYTES, HALO_SECONDS, REDUCTION_SECONDS, REDUCTIONS = range(5)
+N_TALLIES = 5
+#: Room for one MPI_Status of any common library (MPICH: 20 bytes, Open MPI: 24), in int32.
+STATUS_INTS = 8
+
+_int, _handle, _pointer = ctypes.c_int, ctypes.c_int64, ctypes.c_void_p
+#: name -> (ctypes prototype, numba signature) of the MPI functions the kernels call
+_FUNCTIONS = {
+    "MPI_Isend": (ctypes.CFUNCTYPE(_int, _pointer, _int, _handle, _int, _int, _handle, _pointer),
+                  types.int32(types.voidptr, types.int32, types.int64, types.int32, types.int32, types.int64,
+                              types.voidptr)),
+    "MPI_Irecv": (ctypes.CFUNCTYPE(_int, _pointer, _int, _handle, _int, _int, _handle, _pointer),
+                  types.int32(types.voidptr, types.int32, types.int64, types.int32, types.int32, types.int64,
+                              types.voidptr)),
+    "MPI_Waitall": (ctypes.CFUNCTYPE(_int, _int, _pointer, _pointer), types.int32(types.int32, types.voidptr,
+                                                                                 types.voidptr)),
+    "MPI_Allreduce": (ctypes.CFUNCTYPE(_int, _pointer, _pointer, _int, _handle, _handle, _handle),
+                      types.int32(types.voidptr, types.voidptr, types.int32, types.int64, types.int64, types.int64)),
+    "MPI_Wtime": (ctypes.CFUNCTYPE(ctypes.c_double), types.float64()),
+}
+_isend, _irecv, _waitall, _allreduce, _wtime = (types.ExternalFunction(name, signature)
+                                               for name, (_, signature) in _FUNCTIONS.items())
+
+
+def _stand_in(prototype):
+    return prototype(lambda *args: -1 if prototype._restype_ is _int else 0.0)
+
+
+_STAND_INS = {name: _stand_in(prototype) for name, (prototype, _) in _FUNCTIONS.items()}
+
+
+def _mapped_library():
+    """The path of the MPI library mapped into this process, or None."""
+    try:
+        with open("/proc/self/maps") as maps:
+            for line in maps:
+                path = line.split()[-1]
+                if "/libmpi" in path and ".so" in path:
+                    return path
+    except OSError:
+        return None
+    return None
+
+
+def bind_library() -> bool:
+    """Point the kernels' MPI names at the library mapped into this process (mpi4py's, once it is
+    imported); returns whether one was found.  Without one, the names keep their stand-ins."""
+    path = _mapped_library()
+    if path is None:
+        for name, stand_in in _STAND_INS.items():
+            llvm.add_symbol(name, ctypes.cast(stand_in, ctypes.c_void_p).value)
+        return False
+    library = ctypes.CDLL(path)
+    for name in _FUNCTIONS:
+        llvm.add_symbol(name, ctypes.cast(getattr(library, name), ctypes.c_void_p).value)
+    return True
+
+
+bind_library()
+
+
+def no_halo():
+    """The halo of a problem held whole by one process: no neighbour, no reduction."""
+    empty = np.zeros(0, dtype=np.int64)
+    return (np.int64(0), np.int64(1), np.zeros(0, dtype=np.int32), empty, np.zeros(1, dtype=np.int64),
+            np.zeros(1, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(1, dtype=np.int64),
+            np.zeros(STATUS_INTS, dtype=np.int32), np.int64(0), np.int64(0), np.zeros(N_TALLIES))
+
+
+@jit(inline="always")
+def _address(array, start):
+    """The address of ``array[start]``, for the library."""
+    return array[start:].ctypes
+
+
+@jit
+def share_rows(values, first_ghost, halo):
+    """Overwrite the ghost rows of ``values`` (2-d, float64, from row ``first_ghost`` on) with
+    their owners' rows: one message each way per neighbour.  Collective among neighbours."""
+    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _ = halo
+    if size == 1 or neighbours.shape[0] == 0:
+        return
+    width = values.shape[1]
+    for j in range(rows.shape[0]):
+        for k in range(width):
+            send[j * width + k] = values[rows[j], k]
+    _swap(halo, width)
+    for j in range(recv_ptr[-1]):
+        for k in range(width):
+            values[first_ghost + j, k] = receive[j * width + k]
+
+
+@jit
+def share_flags(flags, first_ghost, halo):
+    """:func:`share_rows` for a flag per row."""
+    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _ = halo
+    if size == 1 or neighbours.shape[0] == 0:
+        return
+    for j in range(rows.shape[0]):
+        send[j] = 1.0 if flags[rows[j]] else 0.0
+    _swap(halo, 1)
+    for j in range(recv_ptr[-1]):
+        flags[first_ghost + j] = receive[j] > 0.5
+
+
+@jit
+def _swap(halo, width):
+    """Send each neighbour its part of the packed send buffer and receive its ghost rows (rows of
+    ``width`` floats); returns when both are done."""
+    comm, _, neighbours, _, send_ptr, recv_ptr, send, receive, requests, statuses, double, _, tally = halo
+    started = _wtime()
+    n = 0
+    failed = 0
+    for q in range(neighbours.shape[0]):  # every receive and send posted, then all awaited
+        first, last = recv_ptr[q] * width, recv_ptr[q + 1] * width
+        if last > first:
+            failed |= _irecv(_address(receive, first), last - first, double, neighbours[q], ROWS_TAG, comm,
+                             _address(requests, n))
+            n += 1
+        first, last = send_ptr[q] * width, send_ptr[q + 1] * width
+        if last > first:
+            failed |= _isend(_address(send, first), last - first, double, neighbours[q], ROWS_TAG, comm,
+                             _address(requests, n))
+            n += 1
+            tally[MESSAGES] += 1.0
+            tally[BYTES] += 8.0 * (last - first)
+    failed |= _waitall(n, requests.ctypes, statuses.ctypes)
+    if failed != 0:
+        raise RuntimeError("a ghost-row exchange from a jitted kernel failed (is the MPI library bound? "
+                           "parsim.core.kernel_mpi.bind_library)")
+    tally[HALO_SECONDS] += _wtime() - started
+
+
+@jit
+def global_max(value, halo):
+    """The largest ``value`` over the ranks of the halo's communicator.  Collective."""
+    comm, size, _, _, _, _, _, _, _, _, double, maximum, tally = halo
+    if size == 1:
+        return value
+    started = _wtime()
+    mine = np.full(1, value)
+    largest = np.zeros(1)
+    if _allreduce(mine.ctypes, largest.ctypes, 1, double, maximum, comm) != 0:
+        raise RuntimeError("a global maximum from a jitted kernel failed (is the MPI library bound? "
+                           "parsim.core.kernel_mpi.bind_library)")
+    tally[REDUCTIONS] += 1.0
+    tally[REDUCTION_SECONDS] += _wtime() - started
+    return largest[0]
