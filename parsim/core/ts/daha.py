@@ -183,13 +183,14 @@ hundred of them, different ones at each check, moved 3e-3 to 5e-3 per iteration,
 (215 s).  The paper's notation allows both readings: (3.30) writes the indicator at
 ``X^{n,q}``, as it writes the variable of (3.5).
 
-Iterations in one call.  With sleeping spheres, the iterations between two full sweeps (15 of
-every 16) run in one jitted call, :func:`_quiet_iterations`, which exchanges the ghost rows and
-reduces the drift from inside (:mod:`parsim.core.kernel_mpi`); it returns early at an iteration
-that must search pairs again, which then runs here, with the full sweeps.  The operations are
-those of the Python loop, in the same order: one process gives the same result bit for bit, and
-the loop no longer leaves numba at every iteration (at N = 10^5 the round trips were 40 % of a
-time step).
+Iterations in one call.  The iterations run in one jitted call, :func:`_iterations`, which
+exchanges the ghost rows and reduces the drift from inside (:mod:`parsim.core.kernel_mpi`).  It
+returns to Python only for what Python does (:class:`_Minimisation`): after a check iteration
+(every ``FULL_SWEEP_EVERY``-th with sleeping spheres, every one without), for the stopping tests,
+settled tiles and sleeping spheres; and before an iteration whose pairs must be searched again.
+The operations are those of the former loop in Python, in the same order: one process gives the
+same result bit for bit, without leaving numba at every iteration (at N = 10^5 those round trips
+were 40 % of a time step).
 
 Candidate pairs.  The pairs that can touch are those with a gap of at most ``problem.reach``.
 They are kept as a Verlet list refreshed sphere by sphere: once a sphere is ``REFRESH_DRIFT``
@@ -730,52 +731,74 @@ def _drop_settled(awake, settled, is_awake):
 
 
 
+#: Why :func:`_iterations` returned: it reached the iteration it was asked to stop at, it ended
+#: a check iteration (the caller tests the stopping conditions), or the pairs must be searched
+#: again before the next iteration moves anything.
+REACHED_LAST, CHECK_DUE, REFRESH_DUE = 0, 1, 2
+
+
 @jit
-def _quiet_iterations(iteration, last, P, R, U, new, previous, previous_ghost, built_at, stepped, awake, drift,
-                      refresh_at, lam, phi, sphere_overlap, attracts, damping_of, is_awake, settled, any_settled,
-                      adjacency, pair_a, pair_b, cross_pairs, coefficients, dynamic, halo):
-    """The iterations from ``iteration`` up to ``last`` (the next check), each as in :func:`minimise`
-    without a full sweep, run here with the ghost rows exchanged from this kernel.  Returns early,
-    before moving anything, at the first iteration whose pairs must be searched again (the global
-    ``drift`` above ``refresh_at``): the caller runs that one.  Returns ``(iteration, awake,
-    stepped, drift)``."""
+def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, polishing, any_settled, adjacency,
+                pairs, coefficients, dynamic, halo):
+    """DAHA iterations from ``iteration`` on, in one call, with the ghost rows and the drift's
+    maximum exchanged from here (:mod:`parsim.core.kernel_mpi`).  It returns at ``last``, after
+    a check iteration (its moves and multipliers done, the tests left to the caller), or before an
+    iteration whose pairs must be searched again (the global ``drift`` above ``refresh_at``).
+    Returns ``(iteration, awake, stepped, drift, why)``.
+
+    Each iteration: the drift test; on a full sweep every sphere outside settled tiles awake;
+    (3.20)-(3.23) for the awake spheres; (3.24) for their pairs; then, between checks, the
+    spheres that a moving partner wakes (module docstring, "Sleeping spheres")."""
+    P, R, U, new, previous, previous_ghost, built_at, lam, phi, sphere_overlap, attracts, damping_of, is_awake, \
+        settled, is_anchor = state
     link_ptr, link_to, pair_ptr, pair_of, pair_partner, ghost_ptr, ghost_partner = adjacency
-    delta, alpha, gamma, c_bar, rate, stable, guarded, sleep = coefficients
+    pair_a, pair_b, cross_pairs = pairs
+    delta, alpha, gamma, c_bar, rate, stable, guarded, sleep, stiffness_limit, max_damping = coefficients
     n_moving = U.shape[0]
     first_ghost = P.shape[0] - previous_ghost.shape[0]
     damping_rows = damping_of.reshape((damping_of.shape[0], 1))
     while iteration < last:
+        check = sleep == 0.0 or iteration % FULL_SWEEP_EVERY == 0
         _copy_rows(previous, P, stepped)
         drift = max(drift, _largest_step(P, built_at, stepped))
-        if global_max(drift, halo) > refresh_at:
-            return iteration, awake, stepped, drift
+        if global_max(drift, halo) > refresh_at:  # a pair may come within reach
+            return iteration, awake, stepped, drift, REFRESH_DUE
+        full = check and not polishing
+        if full:
+            awake = _drop_settled(np.arange(n_moving), settled, is_awake) if any_settled else np.arange(n_moving)
         stepped = awake
         previous_ghost[:] = P[first_ghost:]
         _drift(P, U, awake, 0.5 * delta)
         share_rows(P, first_ghost, halo)
         _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_partner, lam, sphere_overlap,
-                         guarded, dynamic, delta, alpha, gamma, c_bar, attracts, new, damping_of, STIFFNESS_LIMIT,
-                         MAX_DAMPING)
-        _copy_rows(P, new, awake)
+                         guarded, dynamic, delta, alpha, gamma, c_bar, attracts, new, damping_of, stiffness_limit,
+                         max_damping)
+        _copy_rows(P, new, awake)  # accept the new positions
         share_rows(P, first_ghost, halo)
         if dynamic:
             share_rows(damping_rows, first_ghost, halo)
-        mostly_awake = 2 * awake.shape[0] > n_moving
-        if mostly_awake:
+        mostly_awake = 2 * awake.shape[0] > n_moving  # then pair by pair beats sphere by sphere
+        if full:
+            _update_multipliers(P, R, phi, pair_a, pair_b, lam, rate, damping_of, stable, settled | is_anchor)
+        elif mostly_awake:
             _update_multipliers(P, R, phi, pair_a, pair_b, lam, rate, damping_of, stable, ~is_awake)
-            awake = _spread_dense(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, link_ptr,
-                                  link_to, pair_a, pair_b, sleep)
         else:
             _update_multipliers_near(P, R, phi, awake, is_awake, n_moving, pair_ptr, pair_of, pair_partner, lam,
                                      rate, damping_of, stable)
             _update_cross_pairs_near(P, R, cross_pairs, pair_a, pair_b, is_awake, phi, lam, rate, damping_of, stable)
+        iteration += 1
+        if check:
+            return iteration, awake, stepped, drift, CHECK_DUE
+        if mostly_awake:
+            awake = _spread_dense(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, link_ptr,
+                                  link_to, pair_a, pair_b, sleep)
+        else:
             awake = _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, link_ptr, link_to,
                             pair_ptr, pair_partner, ghost_ptr, ghost_partner, sleep)
-        iteration += 1
         if any_settled:
             awake = _drop_settled(awake, settled, is_awake)
         share_flags(is_awake, first_ghost, halo)
-    return iteration, awake, stepped, drift
+    return iteration, awake, stepped, drift, REACHED_LAST
 
 
 def minimise(problem, params, attraction_range=math.inf, exchange=None, on_iteration=None, multipliers=None,
@@ -795,160 +818,171 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     ``finite=False``, at the first full sweep after a position becomes non-finite, and with
     ``left_halo=True`` when a sphere moved farther than ``exchange.margin``.
     """
-    exchange = exchange or SerialExchange()
-    if tile_of is None:
-        tile_of = np.zeros(problem.n_moving, dtype=np.int64)
-    P, R = problem.positions, problem.radii
-    start = P[:problem.n_moving].copy()
-    built_at = start.copy()
-    n_moving, d = problem.n_moving, P.shape[1]
-    first_ghost = problem.first_ghost
-    delta = params.step
-    floor = OVERLAP_FLOOR * params.overlap_tolerance
-    U = np.zeros((n_moving, d))
-    lam = _initial_multipliers(P, R, problem.pair_a, problem.pair_b, params.initial_multiplier)
-    if multipliers is not None:
-        known = np.isfinite(multipliers)
-        lam[known] = multipliers[known]
-    sphere_overlap = np.zeros(n_moving if params.dynamic else 0)  # phi_i^A of (3.29), for dynamic damping only
-    previous = start.copy()
-    previous_ghost = P[first_ghost:].copy()
-    phi = np.empty(problem.pair_a.size)
-    _constraint_values(P, R, problem.pair_a, problem.pair_b, phi)
-    total, overlapping = _measure(phi, problem.pair_counted, problem.link_ptr, problem.pair_ptr, problem.pair_of,
-                                  sphere_overlap)
-    n_links = exchange.sum(float(problem.n_links))
-    n_spheres = exchange.sum(float(n_moving))
-    total = exchange.sum(total)
-    mean_overlap = total / max(n_links, 1.0)
-    typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
-    range_sq = attraction_range**2 if math.isfinite(attraction_range) else math.inf
-    attracts = _attracting_links(P, problem.link_ptr, problem.link_to, range_sq)
-    new = np.empty((n_moving, d))
-    damping_of = np.where(problem.moving_ghost, params.damping, math.inf)  # anchors never limit a rate
-    damping_of[:n_moving] = params.damping
-    is_anchor = damping_of == math.inf
-    stable = delta * STABILITY_MARGIN * params.penalty / (2.0 * params.attraction)
-    largest = deepest = math.inf
-    everyone = np.arange(n_moving)
-    awake = everyone
-    is_awake = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghost rows as on their owner
-    restless = np.zeros(P.shape[0], dtype=np.bool_)
-    moved = np.zeros(P.shape[0], dtype=np.bool_)  # whose candidate pairs are searched again
-    settled = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows in settled tiles, ghost rows as on their owner
-    any_settled = False
-    jammed_checks = np.zeros(n_tiles, dtype=np.int64)
-    in_jammed_tile = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghost rows as on their owner
-    sleep = params.sleep_tolerance
-    polishing = False
-    iteration = 0
-    # Only the spheres stepped in an iteration move, so the bookkeeping between iterations
-    # goes over those alone: ``previous`` equals ``P`` on every other moving row, and
-    # ``drift`` bounds from above how far any moving sphere is from ``built_at``.
-    stepped = everyone[:0]
-    drift = 0.0
-    halo = exchange.kernel_halo
-    while iteration < params.max_iterations:
-        guarded = max(typical_overlap, floor)
-        rate = delta * params.multiplier_rate * (math.sqrt(n_spheres) / guarded if params.dynamic else 1.0)
-        if sleep > 0.0 and iteration % FULL_SWEEP_EVERY != 0 and on_iteration is None:
-            # the iterations up to the next check, in one call; it stops short where the pairs
-            # must be searched again, and the loop below runs that iteration
-            last = min(params.max_iterations, (iteration // FULL_SWEEP_EVERY + 1) * FULL_SWEEP_EVERY)
-            coefficients = (delta, params.attraction, params.penalty, params.damping, rate, stable, guarded, sleep)
-            adjacency = (problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of, problem.pair_partner,
-                         problem.ghost_ptr, problem.ghost_partner)  # searched again at times: taken afresh
-            iteration, awake, stepped, drift = _quiet_iterations(
-                iteration, last, P, R, U, new, previous, previous_ghost, built_at, stepped, awake, drift,
-                REFRESH_DRIFT * problem.reach, lam, phi, sphere_overlap, attracts, damping_of, is_awake, settled,
-                any_settled, adjacency, problem.pair_a, problem.pair_b, problem.cross_pairs, coefficients,
-                params.dynamic, halo)
-            if iteration == last:
-                continue
-        check = sleep == 0.0 or iteration % FULL_SWEEP_EVERY == 0
-        full = check and not polishing
-        _copy_rows(previous, P, stepped)
-        drift = max(drift, _largest_step(P, built_at, stepped))
-        if exchange.max(drift) > REFRESH_DRIFT * problem.reach:  # a pair may come within reach
-            if exchange.max(_largest_step(P, start, everyone)) + REFRESH_DRIFT * problem.reach > exchange.margin:
-                return Outcome(False, iteration, mean_overlap, deepest, largest, True, lam, left_halo=True)
-            drift = _rebase(P, built_at, REFRESH_SET * REFRESH_DRIFT * problem.reach, moved)
-            exchange.share(moved)
-            lam, phi = _carried(problem.refresh_pairs(moved), lam, phi, P, R, problem.pair_a, problem.pair_b)
-        if full:
-            awake = _drop_settled(everyone, settled, is_awake) if any_settled else everyone
-        stepped = awake
-        previous_ghost[:] = P[first_ghost:]
-        _drift(P, U, awake, 0.5 * delta)
-        exchange.share(P)
-        _kick_damp_drift(P, U, R, awake, problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of,
-                         problem.pair_partner, lam, sphere_overlap, guarded, params.dynamic, delta,
-                         params.attraction, params.penalty, params.damping, attracts, new, damping_of,
-                         STIFFNESS_LIMIT, MAX_DAMPING)
-        _copy_rows(P, new, awake)  # accept the new positions
-        exchange.share(P)
-        if params.dynamic:
-            exchange.share(damping_of)
-        mostly_awake = 2 * awake.shape[0] > n_moving  # then pair by pair beats sphere by sphere
-        if full:
-            _update_multipliers(P, R, phi, problem.pair_a, problem.pair_b, lam, rate, damping_of, stable,
-                                settled | is_anchor)
-        elif mostly_awake:
-            _update_multipliers(P, R, phi, problem.pair_a, problem.pair_b, lam, rate, damping_of, stable, ~is_awake)
-        else:
-            _update_multipliers_near(P, R, phi, awake, is_awake, n_moving, problem.pair_ptr, problem.pair_of,
-                                     problem.pair_partner, lam, rate, damping_of, stable)
-            _update_cross_pairs_near(P, R, problem.cross_pairs, problem.pair_a, problem.pair_b, is_awake, phi, lam,
-                                     rate, damping_of, stable)
-        iteration += 1
-        if on_iteration is not None:
-            on_iteration(iteration, problem)
-        graph = (problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_partner, problem.ghost_ptr,
-                 problem.ghost_partner)
-        if not check:
-            if mostly_awake:
-                awake = _spread_dense(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost,
-                                      problem.link_ptr, problem.link_to, problem.pair_a, problem.pair_b, sleep)
-            else:
-                awake = _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, *graph, sleep)
-            if any_settled:
-                awake = _drop_settled(awake, settled, is_awake)
-            exchange.share(is_awake)
+    run = _Minimisation(problem, params, attraction_range, exchange or SerialExchange(), multipliers,
+                        np.zeros(problem.n_moving, dtype=np.int64) if tile_of is None else tile_of, n_tiles)
+    while run.iteration < params.max_iterations:
+        last = params.max_iterations if on_iteration is None else run.iteration + 1
+        why = run.iterate(last)
+        if why == REFRESH_DUE:
+            if run.left_halo():
+                return run.outcome(False, left_halo=True)
+            run.refresh_pairs()
             continue
-        total, overlapping = _measure(phi, problem.pair_counted, problem.link_ptr, problem.pair_ptr, problem.pair_of,
-                                      sphere_overlap)
+        if on_iteration is not None:
+            on_iteration(run.iteration, problem)
+        if why == CHECK_DUE:
+            finished = run.check()
+            if finished is not None:
+                return finished
+    return run.outcome(False)
+
+
+class _Minimisation:
+    """The state of one :func:`minimise` between calls of :func:`_iterations`, and what it does
+    in Python: search pairs again, and the checks of a full sweep (the stopping tests, settled
+    and jammed tiles, sleeping spheres)."""
+
+    def __init__(self, problem, params, attraction_range, exchange, multipliers, tile_of, n_tiles):
+        self.problem, self.params, self.exchange = problem, params, exchange
+        self.tile_of, self.n_tiles = tile_of, n_tiles
+        P, R = problem.positions, problem.radii
+        n_moving, d = problem.n_moving, P.shape[1]
+        self.start = P[:n_moving].copy()
+        self.built_at = self.start.copy()
+        self.U = np.zeros((n_moving, d))
+        self.lam = _initial_multipliers(P, R, problem.pair_a, problem.pair_b, params.initial_multiplier)
+        if multipliers is not None:
+            known = np.isfinite(multipliers)
+            self.lam[known] = multipliers[known]
+        self.sphere_overlap = np.zeros(n_moving if params.dynamic else 0)  # phi_i^A of (3.29), dynamic damping
+        self.previous = self.start.copy()
+        self.previous_ghost = P[problem.first_ghost:].copy()
+        self.phi = np.empty(problem.pair_a.size)
+        _constraint_values(P, R, problem.pair_a, problem.pair_b, self.phi)
+        self.n_links = exchange.sum(float(problem.n_links))
+        self.n_spheres = exchange.sum(float(n_moving))
+        self._measure_overlaps()
+        range_sq = attraction_range**2 if math.isfinite(attraction_range) else math.inf
+        self.attracts = _attracting_links(P, problem.link_ptr, problem.link_to, range_sq)
+        self.new = np.empty((n_moving, d))
+        self.damping_of = np.where(problem.moving_ghost, params.damping, math.inf)  # anchors never limit a rate
+        self.damping_of[:n_moving] = params.damping
+        self.is_anchor = self.damping_of == math.inf
+        self.stable = params.step * STABILITY_MARGIN * params.penalty / (2.0 * params.attraction)
+        self.largest = self.deepest = math.inf
+        self.everyone = np.arange(n_moving)
+        self.awake = self.everyone
+        self.is_awake = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghost rows as on their owner
+        self.restless = np.zeros(P.shape[0], dtype=np.bool_)
+        self.moved = np.zeros(P.shape[0], dtype=np.bool_)  # whose candidate pairs are searched again
+        self.settled = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows in settled tiles, ghosts as on owner
+        self.any_settled = False
+        self.jammed_checks = np.zeros(n_tiles, dtype=np.int64)
+        self.in_jammed_tile = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghosts as on their owner
+        self.polishing = False
+        self.iteration = 0
+        # Only the spheres stepped in an iteration move, so the bookkeeping between iterations
+        # goes over those alone: ``previous`` equals ``P`` on every other moving row, and
+        # ``drift`` bounds from above how far any moving sphere is from ``built_at``.
+        self.stepped = self.everyone[:0]
+        self.drift = 0.0
+        self.halo = exchange.kernel_halo
+
+    def outcome(self, converged, finite=True, left_halo=False):
+        return Outcome(converged, self.iteration, self.mean_overlap, self.deepest, self.largest, finite, self.lam,
+                       left_halo=left_halo)
+
+    def iterate(self, last):
+        """Iterations up to ``last`` at most (:func:`_iterations`); returns why it stopped."""
+        problem, params = self.problem, self.params
+        guarded = max(self.typical_overlap, OVERLAP_FLOOR * params.overlap_tolerance)
+        rate = params.step * params.multiplier_rate * (math.sqrt(self.n_spheres) / guarded if params.dynamic else 1.0)
+        state = (problem.positions, problem.radii, self.U, self.new, self.previous, self.previous_ghost,
+                 self.built_at, self.lam, self.phi, self.sphere_overlap, self.attracts, self.damping_of,
+                 self.is_awake, self.settled, self.is_anchor)
+        adjacency = (problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of, problem.pair_partner,
+                     problem.ghost_ptr, problem.ghost_partner)
+        coefficients = (params.step, params.attraction, params.penalty, params.damping, rate, self.stable, guarded,
+                        params.sleep_tolerance, STIFFNESS_LIMIT, MAX_DAMPING)
+        self.iteration, self.awake, self.stepped, self.drift, why = _iterations(
+            self.iteration, last, state, self.awake, self.stepped, self.drift, REFRESH_DRIFT * problem.reach,
+            self.polishing, self.any_settled, adjacency, (problem.pair_a, problem.pair_b, problem.cross_pairs),
+            coefficients, params.dynamic, self.halo)
+        return why
+
+    def left_halo(self):
+        """Whether a sphere may now reach beyond the ghosts chosen for this minimisation."""
+        problem, exchange = self.problem, self.exchange
+        reach = REFRESH_DRIFT * problem.reach
+        return exchange.max(_largest_step(problem.positions, self.start, self.everyone)) + reach > exchange.margin
+
+    def refresh_pairs(self):
+        """Search again the pairs of the spheres that drifted (module docstring, "Candidate pairs")."""
+        problem = self.problem
+        P, R = problem.positions, problem.radii
+        self.drift = _rebase(P, self.built_at, REFRESH_SET * REFRESH_DRIFT * problem.reach, self.moved)
+        self.exchange.share(self.moved)
+        self.lam, self.phi = _carried(problem.refresh_pairs(self.moved), self.lam, self.phi, P, R, problem.pair_a,
+                                      problem.pair_b)
+
+    def _measure_overlaps(self):
+        """The mean overlap over the links (3.28) and over the overlapping pairs, over all processes."""
+        problem, exchange = self.problem, self.exchange
+        total, overlapping = _measure(self.phi, problem.pair_counted, problem.link_ptr, problem.pair_ptr,
+                                      problem.pair_of, self.sphere_overlap)
         total = exchange.sum(total)
-        mean_overlap = total / max(n_links, 1.0)
-        typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
-        tile_largest, tile_deepest = _tile_maxima(P, previous, phi, problem, tile_of, n_tiles, exchange)
-        largest, deepest = float(tile_largest.max()), float(tile_deepest.max())
-        if not (math.isfinite(largest) and math.isfinite(mean_overlap)):
-            return Outcome(False, iteration, mean_overlap, deepest, largest, False, lam)
+        self.mean_overlap = total / max(self.n_links, 1.0)
+        self.typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
+
+    def check(self):
+        """The tests after a check iteration: an :class:`Outcome` if the minimisation ends, else
+        None after settling tiles and putting spheres to sleep."""
+        problem, params, exchange = self.problem, self.params, self.exchange
+        self._measure_overlaps()
+        tile_largest, tile_deepest = _tile_maxima(problem.positions, self.previous, self.phi, problem, self.tile_of,
+                                                  self.n_tiles, exchange)
+        self.largest, self.deepest = float(tile_largest.max()), float(tile_deepest.max())
+        if not (math.isfinite(self.largest) and math.isfinite(self.mean_overlap)):
+            return self.outcome(False, finite=False)
         # module docstring, "Stopping tile by tile"
         steady = tile_largest <= params.steadiness_tolerance
         too_deep = tile_deepest > params.max_overlap_tolerance
-        done = steady & ~too_deep & (mean_overlap <= params.overlap_tolerance)
+        done = steady & ~too_deep & (self.mean_overlap <= params.overlap_tolerance)
         if done.all():
-            return Outcome(True, iteration, mean_overlap, deepest, largest, True, lam)
-        jammed_checks = np.where(steady & too_deep, jammed_checks + 1, 0)
-        jammed = jammed_checks >= JAMMED_CHECKS
-        if jammed.any() and done.any():  # a jammed tile holds open the tiles pressing on it
-            in_jammed_tile[:n_moving] = jammed[tile_of]
-            exchange.share(in_jammed_tile)
-            pressed = _pressed_tiles(phi, problem.pair_a, problem.pair_b, n_moving, tile_of, n_tiles, in_jammed_tile)
-            done &= exchange.max_array(pressed) == 0.0
-        any_settled = bool(done.any())
-        settled[:n_moving] = done[tile_of]
-        exchange.share(settled)
-        U[settled[:n_moving]] = 0.0
-        if sleep > 0.0:
-            polishing = ((polishing or largest <= params.steadiness_tolerance)
-                         and mean_overlap <= params.overlap_tolerance)
-            _restless(P, previous, phi, problem.pair_ptr, problem.pair_of, sleep, params.overlap_tolerance**2,
-                      settled, restless)
-            exchange.share(restless)
-            awake = _settle(restless, U, is_awake, first_ghost, *graph)
-            if any_settled:
-                awake = _drop_settled(awake, settled, is_awake)
-            exchange.share(is_awake)
-    return Outcome(False, iteration, mean_overlap, deepest, largest, True, lam)
+            return self.outcome(True)
+        done &= ~self._pressing_on_jams(steady & too_deep, done)
+        self.any_settled = bool(done.any())
+        self.settled[:problem.n_moving] = done[self.tile_of]
+        exchange.share(self.settled)
+        self.U[self.settled[:problem.n_moving]] = 0.0
+        if params.sleep_tolerance > 0.0:
+            self._sleep()
+        return None
+
+    def _pressing_on_jams(self, steady_too_deep, done):
+        """Per tile, whether it presses on a jammed tile (module docstring, "Jammed tiles")."""
+        problem = self.problem
+        self.jammed_checks = np.where(steady_too_deep, self.jammed_checks + 1, 0)
+        jammed = self.jammed_checks >= JAMMED_CHECKS
+        if not (jammed.any() and done.any()):
+            return np.zeros(self.n_tiles, dtype=bool)
+        self.in_jammed_tile[:problem.n_moving] = jammed[self.tile_of]
+        self.exchange.share(self.in_jammed_tile)
+        pressed = _pressed_tiles(self.phi, problem.pair_a, problem.pair_b, problem.n_moving, self.tile_of,
+                                 self.n_tiles, self.in_jammed_tile)
+        return self.exchange.max_array(pressed) != 0.0
+
+    def _sleep(self):
+        """After a check: polishing (module docstring), and which spheres sleep until a partner moves."""
+        problem, params = self.problem, self.params
+        self.polishing = ((self.polishing or self.largest <= params.steadiness_tolerance)
+                          and self.mean_overlap <= params.overlap_tolerance)
+        _restless(problem.positions, self.previous, self.phi, problem.pair_ptr, problem.pair_of,
+                  params.sleep_tolerance, params.overlap_tolerance**2, self.settled, self.restless)
+        self.exchange.share(self.restless)
+        self.awake = _settle(self.restless, self.U, self.is_awake, problem.first_ghost, problem.link_ptr,
+                             problem.link_to, problem.pair_ptr, problem.pair_partner, problem.ghost_ptr,
+                             problem.ghost_partner)
+        if self.any_settled:
+            self.awake = _drop_settled(self.awake, self.settled, self.is_awake)
+        self.exchange.share(self.is_awake)
