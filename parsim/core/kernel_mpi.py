@@ -17,7 +17,7 @@ stand-ins for that process.
 A *halo* tuple describes one rank's ghost exchange: communicator, size, the neighbours' ranks,
 which owned rows go to each (back to back, delimited by ``send_ptr``), how many ghost rows come
 from each (``recv_ptr``, stored from the first ghost row on), buffers, requests and statuses,
-the handles of MPI_DOUBLE and MPI_MAX, and a tally of what was sent
+the handles of MPI_DOUBLE, MPI_MAX and MPI_SUM, and a tally of what was sent
 (:func:`parsim.parallel.halo.HaloPlan.kernel_halo` builds it).  :func:`no_halo` is the
 one-process halo: the kernels then make no MPI call at all.
 """
@@ -101,7 +101,7 @@ def no_halo():
     empty = np.zeros(0, dtype=np.int64)
     return (np.int64(0), np.int64(1), np.zeros(0, dtype=np.int32), empty, np.zeros(1, dtype=np.int64),
             np.zeros(1, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(1, dtype=np.int64),
-            np.zeros(STATUS_INTS, dtype=np.int32), np.int64(0), np.int64(0), np.zeros(N_TALLIES))
+            np.zeros(STATUS_INTS, dtype=np.int32), np.int64(0), np.int64(0), np.int64(0), np.zeros(N_TALLIES))
 
 
 @jit(inline="always")
@@ -114,7 +114,7 @@ def _address(array, start):
 def share_rows(values, first_ghost, halo):
     """Overwrite the ghost rows of ``values`` (2-d, float64, from row ``first_ghost`` on) with
     their owners' rows: one message each way per neighbour.  Collective among neighbours."""
-    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _ = halo
+    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _, _ = halo
     if size == 1 or neighbours.shape[0] == 0:
         return
     width = values.shape[1]
@@ -130,7 +130,7 @@ def share_rows(values, first_ghost, halo):
 @jit
 def share_flags(flags, first_ghost, halo):
     """:func:`share_rows` for a flag per row."""
-    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _ = halo
+    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _, _ = halo
     if size == 1 or neighbours.shape[0] == 0:
         return
     for j in range(rows.shape[0]):
@@ -144,7 +144,7 @@ def share_flags(flags, first_ghost, halo):
 def _swap(halo, width):
     """Send each neighbour its part of the packed send buffer and receive its ghost rows (rows of
     ``width`` floats); returns when both are done."""
-    comm, _, neighbours, _, send_ptr, recv_ptr, send, receive, requests, statuses, double, _, tally = halo
+    comm, _, neighbours, _, send_ptr, recv_ptr, send, receive, requests, statuses, double, _, _, tally = halo
     started = _wtime()
     n = 0
     failed = 0
@@ -171,15 +171,33 @@ def _swap(halo, width):
 @jit
 def global_max(value, halo):
     """The largest ``value`` over the ranks of the halo's communicator.  Collective."""
-    comm, size, _, _, _, _, _, _, _, _, double, maximum, tally = halo
+    return _reduced(np.full(1, value), halo, False)[0]
+
+
+@jit
+def global_sum(value, halo):
+    """The sum of ``value`` over the ranks of the halo's communicator.  Collective."""
+    return _reduced(np.full(1, value), halo, True)[0]
+
+
+@jit
+def global_max_array(values, halo):
+    """``values`` (float64) maximised element by element over the ranks.  Collective."""
+    return _reduced(values, halo, False)
+
+
+@jit
+def _reduced(values, halo, add):
+    """``values`` summed (``add``) or maximised element by element over the ranks of the halo."""
+    comm, size, _, _, _, _, _, _, _, _, double, maximum, total, tally = halo
     if size == 1:
-        return value
+        return values
     started = _wtime()
-    mine = np.full(1, value)
-    largest = np.zeros(1)
-    if _allreduce(mine.ctypes, largest.ctypes, 1, double, maximum, comm) != 0:
-        raise RuntimeError("a global maximum from a jitted kernel failed (is the MPI library bound? "
+    mine = np.ascontiguousarray(values).copy()
+    result = np.empty_like(mine)
+    if _allreduce(mine.ctypes, result.ctypes, mine.shape[0], double, total if add else maximum, comm) != 0:
+        raise RuntimeError("a reduction from a jitted kernel failed (is the MPI library bound? "
                            "parsim.core.kernel_mpi.bind_library)")
     tally[REDUCTIONS] += 1.0
     tally[REDUCTION_SECONDS] += _wtime() - started
-    return largest[0]
+    return result

@@ -93,7 +93,7 @@ class HaloPlan:
                 rows, _offsets(send_counts), _offsets(self.ghost_counts), np.zeros(len(rows) * width),
                 np.zeros(self.n_ghost * width), np.zeros(n_requests, dtype=request_dtype),
                 np.zeros(n_requests * kernel_mpi.STATUS_INTS, dtype=np.int32), _handle(MPI.DOUBLE), _handle(MPI.MAX),
-                np.zeros(kernel_mpi.N_TALLIES) if tally is None else tally)
+                _handle(MPI.SUM), np.zeros(kernel_mpi.N_TALLIES) if tally is None else tally)
 
     def _new_buffers(self, trailing: tuple, dtype) -> tuple[np.ndarray, np.ndarray]:
         """Send buffer (rows for all neighbours, back to back) and receive buffer (the ghosts)."""

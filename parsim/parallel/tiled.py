@@ -127,9 +127,6 @@ class _ProblemExchange:
     def max(self, value):
         return self.domain.max(value)
 
-    def max_array(self, values):
-        return self.domain.max_array(values)
-
 
 class DecomposedDomain:
     """The spheres of one run shared out among the ranks of ``comm`` (collective; every rank

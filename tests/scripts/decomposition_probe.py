@@ -198,6 +198,9 @@ def check_kernel_halo(decomposition, plan, owned_positions, owned_ids, ghost_pos
     assert np.array_equal(flags[n_owned:], ghost_ids % 3 == 0)
     size = decomposition.comm.Get_size()
     assert kernel_mpi.global_max(float(decomposition.rank), halo) == size - 1
+    assert kernel_mpi.global_sum(float(decomposition.rank + 1), halo) == size * (size + 1) / 2
+    spread = kernel_mpi.global_max_array(np.array([decomposition.rank, -decomposition.rank], dtype=float), halo)
+    assert np.array_equal(spread, [size - 1, 0.0])
     sending = sum(len(rows) > 0 for rows in plan.send_indices) if size > 1 else 0
     assert halo[-1][kernel_mpi.MESSAGES] == 2 * sending, (halo[-1], sending)
 

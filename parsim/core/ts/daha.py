@@ -211,7 +211,7 @@ import numpy as np
 
 from parsim.core import kernel_mpi
 from parsim.core.jit import jit
-from parsim.core.kernel_mpi import global_max, share_flags, share_rows
+from parsim.core.kernel_mpi import global_max, global_max_array, global_sum, share_flags, share_rows
 from parsim.core.ts.contacts import _distance_sq
 
 #: With dynamic parameters, phi_A below OVERLAP_FLOOR x eps_c counts as no overlap at all.
@@ -281,8 +281,8 @@ class SerialExchange:
     A decomposed run passes an object with the same members: ``share(values)`` overwrites,
     in place, the ghost rows (from ``problem.first_ghost`` on) of a per-member array with
     their owners' rows; ``sum`` and ``max`` reduce a float over all parts of the problem;
-    ``margin`` is how far a sphere may move from where the ghosts were chosen; ``max_array``
-    reduces an array element by element (the per-tile stopping tests).
+    ``margin`` is how far a sphere may move from where the ghosts were chosen; ``kernel_halo``
+    is the same exchange for the jitted iterations (:mod:`parsim.core.kernel_mpi`).
     """
 
     margin = math.inf
@@ -300,9 +300,6 @@ class SerialExchange:
 
     def max(self, value):
         return value
-
-    def max_array(self, values):
-        return values
 
 
 @jit
@@ -686,13 +683,6 @@ def _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_ti
     return pressed
 
 
-def _tile_maxima(P, previous, phi, problem, tile_of, n_tiles, exchange):
-    """Per tile, over all processes: the largest step (3.27) and the deepest overlap."""
-    largest, deepest = _tile_measures(P, previous, phi, problem.pair_a, problem.pair_b, problem.n_moving, tile_of,
-                                      n_tiles)
-    return exchange.max_array(largest), exchange.max_array(deepest)
-
-
 @jit
 def _initial_multipliers(P, R, pair_a, pair_b, initial):
     """Eq. 3.26: ``lambda_ij = lambda max(0, phi_ij)``."""
@@ -731,38 +721,45 @@ def _drop_settled(awake, settled, is_awake):
 
 
 
-#: Why :func:`_iterations` returned: it reached the iteration it was asked to stop at, it ended
-#: a check iteration (the caller tests the stopping conditions), or the pairs must be searched
-#: again before the next iteration moves anything.
-REACHED_LAST, CHECK_DUE, REFRESH_DUE = 0, 1, 2
+#: Why :func:`_iterations` returned: it reached the iteration it was asked to stop at, the pairs
+#: must be searched again before the next iteration moves anything, the stopping tests hold, or a
+#: position or the mean overlap is not finite.
+REACHED_LAST, REFRESH_DUE, CONVERGED, NOT_FINITE = 0, 1, 2, 3
+_GO_ON = -1
 
 
 @jit
-def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, polishing, any_settled, adjacency,
-                pairs, coefficients, dynamic, halo):
-    """DAHA iterations from ``iteration`` on, in one call, with the ghost rows and the drift's
-    maximum exchanged from here (:mod:`parsim.core.kernel_mpi`).  It returns at ``last``, after
-    a check iteration (its moves and multipliers done, the tests left to the caller), or before an
-    iteration whose pairs must be searched again (the global ``drift`` above ``refresh_at``).
-    Returns ``(iteration, awake, stepped, drift, why)``.
+def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags, measures, adjacency, pairs,
+                coefficients, checks, dynamic, halo):
+    """DAHA iterations from ``iteration`` on, in one call, with the ghost rows and the reductions
+    exchanged from here (:mod:`parsim.core.kernel_mpi`), until ``last``, the stopping tests, a
+    non-finite value, or an iteration whose pairs must be searched again (the global ``drift``
+    above ``refresh_at``; it returns before moving anything).  Returns ``(iteration, awake,
+    stepped, drift, why, flags, measures)``, ``flags`` = ``(polishing, any_settled)`` and
+    ``measures`` = ``(mean_overlap, typical_overlap, largest, deepest)``.
 
     Each iteration: the drift test; on a full sweep every sphere outside settled tiles awake;
     (3.20)-(3.23) for the awake spheres; (3.24) for their pairs; then, between checks, the
-    spheres that a moving partner wakes (module docstring, "Sleeping spheres")."""
+    spheres that a moving partner wakes (module docstring, "Sleeping spheres"), and on a check
+    the tests of :func:`_check`."""
     P, R, U, new, previous, previous_ghost, built_at, lam, phi, sphere_overlap, attracts, damping_of, is_awake, \
         settled, is_anchor = state
     link_ptr, link_to, pair_ptr, pair_of, pair_partner, ghost_ptr, ghost_partner = adjacency
     pair_a, pair_b, cross_pairs = pairs
-    delta, alpha, gamma, c_bar, rate, stable, guarded, sleep, stiffness_limit, max_damping = coefficients
+    delta, alpha, gamma, c_bar, stable, sleep, stiffness_limit, max_damping = coefficients[:8]
+    multiplier_rate, floor, n_spheres = coefficients[8:]
+    polishing, any_settled = flags
     n_moving = U.shape[0]
     first_ghost = P.shape[0] - previous_ghost.shape[0]
     damping_rows = damping_of.reshape((damping_of.shape[0], 1))
     while iteration < last:
+        guarded = max(measures[1], floor)
+        rate = delta * multiplier_rate * (math.sqrt(n_spheres) / guarded if dynamic else 1.0)
         check = sleep == 0.0 or iteration % FULL_SWEEP_EVERY == 0
         _copy_rows(previous, P, stepped)
         drift = max(drift, _largest_step(P, built_at, stepped))
         if global_max(drift, halo) > refresh_at:  # a pair may come within reach
-            return iteration, awake, stepped, drift, REFRESH_DUE
+            return iteration, awake, stepped, drift, REFRESH_DUE, (polishing, any_settled), measures
         full = check and not polishing
         if full:
             awake = _drop_settled(np.arange(n_moving), settled, is_awake) if any_settled else np.arange(n_moving)
@@ -788,7 +785,11 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, polis
             _update_cross_pairs_near(P, R, cross_pairs, pair_a, pair_b, is_awake, phi, lam, rate, damping_of, stable)
         iteration += 1
         if check:
-            return iteration, awake, stepped, drift, CHECK_DUE
+            why, awake, polishing, any_settled, measures = _check(state, awake, polishing, adjacency, pairs, checks,
+                                                                  sleep, halo)
+            if why != _GO_ON:
+                return iteration, awake, stepped, drift, why, (polishing, any_settled), measures
+            continue
         if mostly_awake:
             awake = _spread_dense(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, link_ptr,
                                   link_to, pair_a, pair_b, sleep)
@@ -798,7 +799,68 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, polis
         if any_settled:
             awake = _drop_settled(awake, settled, is_awake)
         share_flags(is_awake, first_ghost, halo)
-    return iteration, awake, stepped, drift, REACHED_LAST
+    return iteration, awake, stepped, drift, REACHED_LAST, (polishing, any_settled), measures
+
+
+@jit
+def _check(state, awake, polishing, adjacency, pairs, checks, sleep, halo):
+    """The tests after a check iteration (module docstring, "Stopping tile by tile", "Jammed
+    tiles", "Polishing"): ``(why, awake, polishing, any_settled, measures)``, ``why`` CONVERGED,
+    NOT_FINITE or ``_GO_ON``; settles tiles and puts spheres to sleep when it goes on."""
+    P, R, U, new, previous, previous_ghost, built_at, lam, phi, sphere_overlap, attracts, damping_of, is_awake, \
+        settled, is_anchor = state
+    link_ptr, link_to, pair_ptr, pair_of, pair_partner, ghost_ptr, ghost_partner = adjacency
+    pair_a, pair_b, cross_pairs = pairs
+    tile_of, jammed_checks, in_jammed_tile, restless, pair_counted, tolerances, n_links, jammed_limit = checks
+    steadiness, max_overlap, overlap = tolerances
+    n_moving, n_tiles = U.shape[0], jammed_checks.shape[0]
+    first_ghost = P.shape[0] - previous_ghost.shape[0]
+    mean_overlap, typical_overlap = _overlaps(phi, pair_counted, link_ptr, pair_ptr, pair_of, sphere_overlap, n_links,
+                                              halo)
+    tile_largest, tile_deepest = _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
+    tile_largest, tile_deepest = global_max_array(tile_largest, halo), global_max_array(tile_deepest, halo)
+    largest, deepest = tile_largest.max(), tile_deepest.max()
+    measures = (mean_overlap, typical_overlap, largest, deepest)
+    if not (math.isfinite(largest) and math.isfinite(mean_overlap)):
+        return NOT_FINITE, awake, polishing, False, measures
+    steady = tile_largest <= steadiness
+    too_deep = tile_deepest > max_overlap
+    done = steady & ~too_deep & (mean_overlap <= overlap)
+    if done.all():
+        return CONVERGED, awake, polishing, False, measures
+    for t in range(n_tiles):
+        jammed_checks[t] = jammed_checks[t] + 1 if steady[t] and too_deep[t] else 0
+    jammed = jammed_checks >= jammed_limit
+    if jammed.any() and done.any():  # a jammed tile holds open the tiles pressing on it
+        in_jammed_tile[:n_moving] = jammed[tile_of]
+        share_flags(in_jammed_tile, first_ghost, halo)
+        pressed = global_max_array(_pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_tile),
+                                   halo)
+        done &= pressed == 0.0
+    any_settled = done.any()
+    settled[:n_moving] = done[tile_of]
+    share_flags(settled, first_ghost, halo)
+    for i in range(n_moving):
+        if settled[i]:
+            U[i, :] = 0.0
+    if sleep > 0.0:
+        polishing = (polishing or largest <= steadiness) and mean_overlap <= overlap
+        _restless(P, previous, phi, pair_ptr, pair_of, sleep, overlap**2, settled, restless)
+        share_flags(restless, first_ghost, halo)
+        awake = _settle(restless, U, is_awake, first_ghost, link_ptr, link_to, pair_ptr, pair_partner, ghost_ptr,
+                        ghost_partner)
+        if any_settled:
+            awake = _drop_settled(awake, settled, is_awake)
+        share_flags(is_awake, first_ghost, halo)
+    return _GO_ON, awake, polishing, any_settled, measures
+
+
+@jit
+def _overlaps(phi, counted, link_ptr, pair_ptr, pair_of, sphere_overlap, n_links, halo):
+    """The mean overlap over the links (3.28) and over the overlapping pairs, over all ranks."""
+    total, overlapping = _measure(phi, counted, link_ptr, pair_ptr, pair_of, sphere_overlap)
+    total = global_sum(total, halo)
+    return total / max(n_links, 1.0), total / max(global_sum(float(overlapping), halo), 1.0)
 
 
 def minimise(problem, params, attraction_range=math.inf, exchange=None, on_iteration=None, multipliers=None,
@@ -821,8 +883,7 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     run = _Minimisation(problem, params, attraction_range, exchange or SerialExchange(), multipliers,
                         np.zeros(problem.n_moving, dtype=np.int64) if tile_of is None else tile_of, n_tiles)
     while run.iteration < params.max_iterations:
-        last = params.max_iterations if on_iteration is None else run.iteration + 1
-        why = run.iterate(last)
+        why = run.iterate(params.max_iterations if on_iteration is None else run.iteration + 1)
         if why == REFRESH_DUE:
             if run.left_halo():
                 return run.outcome(False, left_halo=True)
@@ -830,21 +891,18 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
             continue
         if on_iteration is not None:
             on_iteration(run.iteration, problem)
-        if why == CHECK_DUE:
-            finished = run.check()
-            if finished is not None:
-                return finished
+        if why != REACHED_LAST:
+            return run.outcome(why == CONVERGED, finite=why != NOT_FINITE)
     return run.outcome(False)
 
 
 class _Minimisation:
-    """The state of one :func:`minimise` between calls of :func:`_iterations`, and what it does
-    in Python: search pairs again, and the checks of a full sweep (the stopping tests, settled
-    and jammed tiles, sleeping spheres)."""
+    """The state of one :func:`minimise` between calls of :func:`_iterations`, and the pair searches
+    it returns for."""
 
     def __init__(self, problem, params, attraction_range, exchange, multipliers, tile_of, n_tiles):
         self.problem, self.params, self.exchange = problem, params, exchange
-        self.tile_of, self.n_tiles = tile_of, n_tiles
+        self.tile_of = tile_of
         P, R = problem.positions, problem.radii
         n_moving, d = problem.n_moving, P.shape[1]
         self.start = P[:n_moving].copy()
@@ -861,7 +919,10 @@ class _Minimisation:
         _constraint_values(P, R, problem.pair_a, problem.pair_b, self.phi)
         self.n_links = exchange.sum(float(problem.n_links))
         self.n_spheres = exchange.sum(float(n_moving))
-        self._measure_overlaps()
+        self.halo = exchange.kernel_halo
+        mean_overlap, typical_overlap = _overlaps(self.phi, problem.pair_counted, problem.link_ptr, problem.pair_ptr,
+                                                  problem.pair_of, self.sphere_overlap, self.n_links, self.halo)
+        self.measures = (mean_overlap, typical_overlap, math.inf, math.inf)  # and the largest step, deepest overlap
         range_sq = attraction_range**2 if math.isfinite(attraction_range) else math.inf
         self.attracts = _attracting_links(P, problem.link_ptr, problem.link_to, range_sq)
         self.new = np.empty((n_moving, d))
@@ -869,45 +930,45 @@ class _Minimisation:
         self.damping_of[:n_moving] = params.damping
         self.is_anchor = self.damping_of == math.inf
         self.stable = params.step * STABILITY_MARGIN * params.penalty / (2.0 * params.attraction)
-        self.largest = self.deepest = math.inf
         self.everyone = np.arange(n_moving)
         self.awake = self.everyone
         self.is_awake = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghost rows as on their owner
         self.restless = np.zeros(P.shape[0], dtype=np.bool_)
         self.moved = np.zeros(P.shape[0], dtype=np.bool_)  # whose candidate pairs are searched again
         self.settled = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows in settled tiles, ghosts as on owner
-        self.any_settled = False
         self.jammed_checks = np.zeros(n_tiles, dtype=np.int64)
         self.in_jammed_tile = np.zeros(P.shape[0], dtype=np.bool_)  # moving rows, then ghosts as on their owner
-        self.polishing = False
+        self.flags = (False, False)  # polishing, any tile settled
         self.iteration = 0
         # Only the spheres stepped in an iteration move, so the bookkeeping between iterations
         # goes over those alone: ``previous`` equals ``P`` on every other moving row, and
         # ``drift`` bounds from above how far any moving sphere is from ``built_at``.
         self.stepped = self.everyone[:0]
         self.drift = 0.0
-        self.halo = exchange.kernel_halo
 
     def outcome(self, converged, finite=True, left_halo=False):
-        return Outcome(converged, self.iteration, self.mean_overlap, self.deepest, self.largest, finite, self.lam,
+        mean_overlap, _, largest, deepest = self.measures
+        return Outcome(converged, self.iteration, mean_overlap, deepest, largest, finite, self.lam,
                        left_halo=left_halo)
 
     def iterate(self, last):
         """Iterations up to ``last`` at most (:func:`_iterations`); returns why it stopped."""
         problem, params = self.problem, self.params
-        guarded = max(self.typical_overlap, OVERLAP_FLOOR * params.overlap_tolerance)
-        rate = params.step * params.multiplier_rate * (math.sqrt(self.n_spheres) / guarded if params.dynamic else 1.0)
         state = (problem.positions, problem.radii, self.U, self.new, self.previous, self.previous_ghost,
                  self.built_at, self.lam, self.phi, self.sphere_overlap, self.attracts, self.damping_of,
                  self.is_awake, self.settled, self.is_anchor)
         adjacency = (problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of, problem.pair_partner,
                      problem.ghost_ptr, problem.ghost_partner)
-        coefficients = (params.step, params.attraction, params.penalty, params.damping, rate, self.stable, guarded,
-                        params.sleep_tolerance, STIFFNESS_LIMIT, MAX_DAMPING)
-        self.iteration, self.awake, self.stepped, self.drift, why = _iterations(
+        coefficients = (params.step, params.attraction, params.penalty, params.damping, self.stable,
+                        params.sleep_tolerance, STIFFNESS_LIMIT, MAX_DAMPING, params.multiplier_rate,
+                        OVERLAP_FLOOR * params.overlap_tolerance, self.n_spheres)
+        tolerances = (params.steadiness_tolerance, params.max_overlap_tolerance, params.overlap_tolerance)
+        checks = (self.tile_of, self.jammed_checks, self.in_jammed_tile, self.restless, problem.pair_counted,
+                  tolerances, self.n_links, JAMMED_CHECKS)
+        self.iteration, self.awake, self.stepped, self.drift, why, self.flags, self.measures = _iterations(
             self.iteration, last, state, self.awake, self.stepped, self.drift, REFRESH_DRIFT * problem.reach,
-            self.polishing, self.any_settled, adjacency, (problem.pair_a, problem.pair_b, problem.cross_pairs),
-            coefficients, params.dynamic, self.halo)
+            self.flags, self.measures, adjacency, (problem.pair_a, problem.pair_b, problem.cross_pairs),
+            coefficients, checks, params.dynamic, self.halo)
         return why
 
     def left_halo(self):
@@ -924,65 +985,3 @@ class _Minimisation:
         self.exchange.share(self.moved)
         self.lam, self.phi = _carried(problem.refresh_pairs(self.moved), self.lam, self.phi, P, R, problem.pair_a,
                                       problem.pair_b)
-
-    def _measure_overlaps(self):
-        """The mean overlap over the links (3.28) and over the overlapping pairs, over all processes."""
-        problem, exchange = self.problem, self.exchange
-        total, overlapping = _measure(self.phi, problem.pair_counted, problem.link_ptr, problem.pair_ptr,
-                                      problem.pair_of, self.sphere_overlap)
-        total = exchange.sum(total)
-        self.mean_overlap = total / max(self.n_links, 1.0)
-        self.typical_overlap = total / max(exchange.sum(float(overlapping)), 1.0)
-
-    def check(self):
-        """The tests after a check iteration: an :class:`Outcome` if the minimisation ends, else
-        None after settling tiles and putting spheres to sleep."""
-        problem, params, exchange = self.problem, self.params, self.exchange
-        self._measure_overlaps()
-        tile_largest, tile_deepest = _tile_maxima(problem.positions, self.previous, self.phi, problem, self.tile_of,
-                                                  self.n_tiles, exchange)
-        self.largest, self.deepest = float(tile_largest.max()), float(tile_deepest.max())
-        if not (math.isfinite(self.largest) and math.isfinite(self.mean_overlap)):
-            return self.outcome(False, finite=False)
-        # module docstring, "Stopping tile by tile"
-        steady = tile_largest <= params.steadiness_tolerance
-        too_deep = tile_deepest > params.max_overlap_tolerance
-        done = steady & ~too_deep & (self.mean_overlap <= params.overlap_tolerance)
-        if done.all():
-            return self.outcome(True)
-        done &= ~self._pressing_on_jams(steady & too_deep, done)
-        self.any_settled = bool(done.any())
-        self.settled[:problem.n_moving] = done[self.tile_of]
-        exchange.share(self.settled)
-        self.U[self.settled[:problem.n_moving]] = 0.0
-        if params.sleep_tolerance > 0.0:
-            self._sleep()
-        return None
-
-    def _pressing_on_jams(self, steady_too_deep, done):
-        """Per tile, whether it presses on a jammed tile (module docstring, "Jammed tiles")."""
-        problem = self.problem
-        self.jammed_checks = np.where(steady_too_deep, self.jammed_checks + 1, 0)
-        jammed = self.jammed_checks >= JAMMED_CHECKS
-        if not (jammed.any() and done.any()):
-            return np.zeros(self.n_tiles, dtype=bool)
-        self.in_jammed_tile[:problem.n_moving] = jammed[self.tile_of]
-        self.exchange.share(self.in_jammed_tile)
-        pressed = _pressed_tiles(self.phi, problem.pair_a, problem.pair_b, problem.n_moving, self.tile_of,
-                                 self.n_tiles, self.in_jammed_tile)
-        return self.exchange.max_array(pressed) != 0.0
-
-    def _sleep(self):
-        """After a check: polishing (module docstring), and which spheres sleep until a partner moves."""
-        problem, params = self.problem, self.params
-        self.polishing = ((self.polishing or self.largest <= params.steadiness_tolerance)
-                          and self.mean_overlap <= params.overlap_tolerance)
-        _restless(problem.positions, self.previous, self.phi, problem.pair_ptr, problem.pair_of,
-                  params.sleep_tolerance, params.overlap_tolerance**2, self.settled, self.restless)
-        self.exchange.share(self.restless)
-        self.awake = _settle(self.restless, self.U, self.is_awake, problem.first_ghost, problem.link_ptr,
-                             problem.link_to, problem.pair_ptr, problem.pair_partner, problem.ghost_ptr,
-                             problem.ghost_partner)
-        if self.any_settled:
-            self.awake = _drop_settled(self.awake, self.settled, self.is_awake)
-        self.exchange.share(self.is_awake)
