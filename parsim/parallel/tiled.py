@@ -16,9 +16,9 @@ is given a :class:`DecomposedDomain` (the interface is in :mod:`parsim.core.ts.d
   ``REBALANCE_ABOVE`` (max / mean) the tile blocks are first moved to even them out;
 - the halos of contact searches, quiet-step bounds and minimisations are
   :class:`parsim.parallel.halo.HaloPlan` s; in a minimisation every DAHA iteration refreshes
-  the ghost rows (positions, and the sleeping flags): the iterations between two checks from
-  inside the jitted loop (:mod:`parsim.core.kernel_mpi`), the others through
-  :class:`_ProblemExchange`;
+  the ghost rows (positions, and the sleeping flags) from inside the jitted loop
+  (:mod:`parsim.core.kernel_mpi`), which also reduces the stopping tests; what runs in Python
+  (pair searches) exchanges through :class:`_ProblemExchange`;
 - the radii, masses, cluster labels and links are known on every rank: new links are
   gathered on all ranks each time step (a few per sphere over a whole run), so the cluster
   relabelling is the same deterministic union-find everywhere, and each merged cluster's
@@ -206,9 +206,6 @@ class DecomposedDomain:
 
     def sum_array(self, values):
         return self._reduce_array(values, MPI.SUM)
-
-    def max_array(self, values):
-        return self._reduce_array(values, MPI.MAX)
 
     def gather(self, rows):
         started = time.perf_counter()
