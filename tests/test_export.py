@@ -356,3 +356,16 @@ def test_errors_name_the_allowed_values(outputs, arguments, message):
 def test_a_folder_that_is_not_parsim_output_is_refused(tmp_path):
     with pytest.raises(JobError, match=f"^{tmp_path} is not a parsim output folder \\(no job.toml in it\\)"):
         run_export(command_line(tmp_path, "--format", "vtk"))
+
+
+@pytest.mark.parametrize("out", ["exported/", "exported"])
+def test_an_out_path_with_a_trailing_slash_or_no_suffix_is_a_folder(outputs, tmp_path, capsys, out):
+    """Several formats exported to the same --out DIR/ (or DIR) land side by side in that folder,
+    created if need be, instead of overwriting one file named DIR."""
+    first = sorted((outputs["deposition"] / "tasks").glob("*.h5"))[0]
+    folder = tmp_path / out.rstrip("/")
+    for format in ("csv", "extxyz"):
+        run_export(command_line(outputs["deposition"], "--format", format, "--out", str(tmp_path / out)))
+    assert capsys.readouterr().out.split() == [str(folder / f"{first.stem}.csv"), str(folder / f"{first.stem}.xyz")]
+    close(read_agglomerate(folder / f"{first.stem}.csv")[0], truth(first).position)
+    assert len(ase.io.read(folder / f"{first.stem}.xyz")) == len(truth(first).position)

@@ -27,6 +27,7 @@ docs/export.md for the commands that load each file.
 
 import argparse
 import io
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -363,9 +364,10 @@ def export_output(output: Path, format: str, task: str | None = None, all_tasks:
     """Export the task ``task`` (default: the job's first task that has a task file) or every task of the
     job in ``output`` as ``format``; the files written.
 
-    ``out`` is, for one task, the file to write or an existing folder to write LABEL + the
-    format's suffix in; for every task, the folder (both default to OUTPUT/export).  A
-    ``vtk`` export of every task also writes JOB.pvd, the collection ParaView opens as one series.
+    ``out`` is, for one task, the file to write or a folder to write LABEL + the format's suffix
+    in (an existing folder, a path ending in a slash, or a name without a suffix; created if need
+    be); for every task, the folder (both default to OUTPUT/export).  A ``vtk`` export of every
+    task also writes JOB.pvd, the collection ParaView opens as one series.
     """
     if format not in FORMATS:
         raise JobError(f"unknown export format {format!r}; allowed: {', '.join(FORMATS)}")
@@ -390,10 +392,17 @@ def export_output(output: Path, format: str, task: str | None = None, all_tasks:
             shown = ", ".join(file.stem for file in files[:5]) + (f", ... ({len(files)} tasks)" * (len(files) > 5))
             raise JobError(f"no task {task!r} in {chosen.parent}; --task takes one of: {shown} (or give --all)")
     target = Path(out) if out is not None else output / EXPORT_FOLDER
-    if out is None or target.is_dir():
+    if out is None or _names_folder(out):
         target = target / f"{chosen.stem}{spec.suffix}"
     _make_folder(target.parent)
     return spec.write(read_task(chosen), target)
+
+
+def _names_folder(out) -> bool:
+    """Whether ``out`` (as typed) is a folder: an existing one, a path ending in a slash, or a name
+    without a suffix (exports always have one)."""
+    text = os.fspath(out)
+    return text.endswith(("/", os.sep)) or Path(text).is_dir() or not Path(text).suffix
 
 
 def _make_folder(folder: Path) -> None:
@@ -413,9 +422,10 @@ def add_export_command(subparsers) -> None:
     which.add_argument("--all", action="store_true", help="export every task (vtk: with a .pvd collection)")
     export.add_argument("--format", required=True, metavar="FORMAT",
                         help="; ".join(f"{name} ({spec.readers})" for name, spec in FORMATS.items()))
-    export.add_argument("--out", type=Path, metavar="PATH",
-                        help="the file to write, or an existing folder to write LABEL.suffix in (default "
-                             "OUTPUT/export); with --all, the folder (default OUTPUT/export)")
+    export.add_argument("--out", metavar="PATH",
+                        help="the file to write, or a folder to write LABEL.suffix in (an existing folder, DIR/ "
+                             "or a name without a suffix; default OUTPUT/export); with --all, the folder "
+                             "(default OUTPUT/export)")
 
 
 def run_export(args: argparse.Namespace) -> int:
