@@ -26,6 +26,7 @@ import threading
 import time
 from pathlib import Path
 
+import h5py
 import numpy as np
 from mpi4py import MPI
 
@@ -38,7 +39,7 @@ from parsim.output.folder import OutputFolder
 from parsim.output.location import check_output_location
 from parsim.output.lock import FolderLock
 from parsim.output.rows import RowWriter
-from parsim.output.snapshot import write_task_file
+from parsim.output.snapshot import provenance_attributes, write_task_file
 from parsim.parallel.collective import on_root, wait_for
 from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
 from parsim.progress import TaskProgress, announcing_preparation
@@ -75,6 +76,11 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
     try:
         with ending_on_signals(lambda number: _end_on_signal(number, job, folder, lock, writing, comm)):
             pending = on_root(comm, lambda: _claim(job, folder, lock))
+            if not pending and on_root(comm, lambda: _dataset_is_current(job, folder)):
+                if rank == 0:
+                    print(f"parsim: nothing to compute: the {len(job.tasks())} tasks of {job.name} have finished "
+                          "and the dataset is this job's; it is left as it is", file=sys.stderr, flush=True)
+                return folder.dataset, True
             done, computing = _run_pending(job, pending, folder, writing, comm, progress and rank == 0,
                                            ranks_per_task, limit)
             wait_for(comm.Ibarrier())  # every rank has closed its row file before rank 0 reads them
@@ -231,6 +237,19 @@ def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None
         wait_for(comm.Ibarrier())  # every rank has its kernels
     if announce:
         print(f"parsim: kernels ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+
+
+def _dataset_is_current(job: Job, folder: OutputFolder) -> bool:
+    """Rank 0: whether the folder's dataset was written for this very job file (its ``job_text``) by
+    this parsim (version and output schema), so that a finished job run again need not write it."""
+    expected = {"job_text": job.text, **provenance_attributes()}
+    try:
+        with h5py.File(folder.dataset, "r") as dataset:
+            found = {key: dataset.attrs.get(key) for key in expected}
+    except (OSError, ValueError):  # no dataset, or not one h5py reads: write it again
+        return False
+    found = {key: value.decode() if isinstance(value, bytes) else value for key, value in found.items()}
+    return found == expected
 
 
 def _write_outputs(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task: int) -> tuple[Path | None, bool]:

@@ -239,3 +239,18 @@ def test_an_input_file_under_another_name_keeps_its_tasks(tmp_path, key):
     (tmp_path / "changed.toml").write_text(job(copy))
     refused = run_serial("validate", str(tmp_path / "changed.toml"), "--output", str(tmp_path / "out"))
     assert refused.returncode == 2 and f"{key} (" in refused.stderr and "flake copy.csv" in refused.stderr
+
+
+def test_a_finished_job_run_again_computes_nothing_and_leaves_its_dataset(tmp_path):
+    """The same command once more: one line says there is nothing to compute, and the dataset's
+    file is not touched; once the job file changes (a sweep value removed) the dataset is written
+    again, for the tasks the job now has."""
+    run_into(tmp_path, "first", FIRST, "out")
+    dataset = tmp_path / "out" / "growing.nc"
+    before = dataset.stat().st_mtime_ns, dataset.read_bytes()
+    again = run_serial("run", str(tmp_path / "first.toml"), "--output", str(tmp_path / "out"))
+    assert again.returncode == 0, again.stderr
+    assert "nothing to compute" in again.stderr and "0 tasks" not in again.stderr
+    assert (dataset.stat().st_mtime_ns, dataset.read_bytes()) == before
+    shrunk = run_into(tmp_path, "shrunk", FIRST.replace("[0.1, 0.2]", "[0.2]"), "out")
+    assert shrunk["volume_fraction"].values.tolist() == [0.2]
