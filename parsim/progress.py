@@ -109,6 +109,37 @@ def announcing_preparation(enabled: bool):
 
 
 @contextmanager
+def announcing_compilation(message: str, enabled: bool):
+    """Within the block, print ``message`` on standard error (if ``enabled``) when one of parsim's
+    kernels starts to compile, not when they all load from numba's cache (numba announces no
+    compilation then); yields a function that tells whether it was printed."""
+    if not enabled:
+        yield lambda: False
+        return
+    from numba.core import event
+
+    from parsim.core.jit import defined_in_core
+
+    started = []
+
+    class FirstCompilation(event.Listener):
+        def on_start(self, ev):
+            if not started and defined_in_core((ev.data or {}).get("dispatcher")):
+                started.append(True)
+                print(message, file=sys.stderr, flush=True)
+
+        def on_end(self, ev):
+            pass
+
+    watch = FirstCompilation()
+    event.register("numba:compile", watch)
+    try:
+        yield lambda: bool(started)
+    finally:
+        event.unregister("numba:compile", watch)
+
+
+@contextmanager
 def preparing(what: str, estimated_seconds: float, clock=time.monotonic):
     """Report on standard error the preparation of ``what`` while the block runs, if it is estimated to
     take more than ``ANNOUNCED_PREPARATION_SECONDS``: a line when it starts, with the estimate, one every

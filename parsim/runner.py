@@ -42,7 +42,7 @@ from parsim.output.rows import RowWriter
 from parsim.output.snapshot import provenance_attributes, write_task_file
 from parsim.parallel.collective import on_root, wait_for
 from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
-from parsim.progress import TaskProgress, announcing_preparation
+from parsim.progress import TaskProgress, announcing_compilation, announcing_preparation
 from parsim.solver import TaskResult
 
 
@@ -189,6 +189,14 @@ def task_attributes(job: Job, task: Task) -> dict:
             "task": task.label, "realization": task.realization}
 
 
+#: Said when the warm-up compiles a kernel.  Measured with benchmarks/compile.py on 2 cores of an AMD
+#: EPYC: the quick start 9-15 s, a time-stepping aggregation 22 s, the first deposition 50-55 s;
+#: loading from the cache 0.1-1 s.
+PREPARING_KERNELS = ("parsim: preparing the kernels (compiled once per installation and processor model: 10-30 s "
+                     "for an aggregation, about a minute for a deposition on one core of an AMD EPYC; loaded from "
+                     "the cache in about a second afterwards)...")
+
+
 def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None = None) -> None:
     """Compile, or load from numba's cache, the kernels of the pending tasks before any task is timed.
 
@@ -215,19 +223,21 @@ def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None
         rehearsals.setdefault(repr(sorted(small.items())), small)
     if not rehearsals:
         return
-    if announce:
-        # Measured with benchmarks/compile.py on 2 cores of an AMD EPYC: the quick start 9-15 s, a
-        # time-stepping aggregation 22 s, the first deposition 50-55 s; loading from the cache 0.1-1 s.
-        print("parsim: preparing the kernels (compiled once per installation and processor model: 10-30 s for "
-              "an aggregation, about a minute for a deposition on one core of an AMD EPYC; loaded from the cache "
-              "in about a second afterwards)...", file=sys.stderr, flush=True)
     start = time.perf_counter()
+    with announcing_compilation(PREPARING_KERNELS, announce) as compiled:
+        _rehearse(solver, rehearsals.values(), announce, comm)
+    if compiled():
+        print(f"parsim: kernels ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+
+
+def _rehearse(solver, rehearsals, announce: bool, comm: MPI.Comm | None) -> None:
+    """Solve each small point of :func:`warm_up` on this rank, the node's first rank before the others."""
     node = comm.Split_type(MPI.COMM_TYPE_SHARED) if comm is not None and comm.Get_size() > 1 else None
     if node is not None and node.Get_rank() > 0:
         wait_for(node.Ibarrier())  # until the node's first rank has compiled and cached the kernels
     try:
         with announcing_preparation(announce):  # the particles are built here on every rank; rank 0 speaks
-            for small in rehearsals.values():
+            for small in rehearsals:
                 solver.solve(small, np.random.default_rng(0), MPI.COMM_SELF)
     finally:
         if node is not None and node.Get_rank() == 0:
@@ -235,8 +245,6 @@ def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None
     if node is not None:
         node.Free()
         wait_for(comm.Ibarrier())  # every rank has its kernels
-    if announce:
-        print(f"parsim: kernels ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 
 
 def _dataset_is_current(job: Job, folder: OutputFolder) -> bool:

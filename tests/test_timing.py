@@ -72,3 +72,15 @@ def test_one_rank_of_a_node_compiles_the_others_load(tmp_path):
     assert result.returncode == 0, result.stderr
     first, second = json.loads(result.stdout.strip().splitlines()[-1])
     assert first > 0 and second == 0  # rank 1 found every kernel in the cache rank 0 filled
+
+
+def test_the_python_api_speaks_of_the_kernels_only_when_it_compiles_them(tmp_path):
+    """From an empty cache the first call says it prepares the kernels and when they are ready; a
+    later process that loads them all from the cache says nothing about them."""
+    environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba_cache")}
+    call = "import parsim; parsim.aggregate(n_spheres=40, volume_fraction=0.1, method='ed', seed=1)"
+    first, second = (subprocess.run([sys.executable, "-c", call], capture_output=True, text=True, env=environment,
+                                    timeout=900) for _ in range(2))
+    assert first.returncode == 0 and second.returncode == 0, first.stderr + second.stderr
+    assert "parsim: preparing the kernels" in first.stderr and "parsim: kernels ready in" in first.stderr
+    assert "kernels" not in second.stderr, second.stderr

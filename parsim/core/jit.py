@@ -53,7 +53,7 @@ def jit(function=None, **overrides):
     return numba.njit(**options)(function)
 
 
-def _defined_in_core(dispatcher):
+def defined_in_core(dispatcher):
     """Whether the function that ``dispatcher`` compiles is one of :mod:`parsim.core`'s kernels."""
     try:
         return Path(dispatcher.py_func.__code__.co_filename).resolve().is_relative_to(cache.CORE)
@@ -78,7 +78,7 @@ class CompilationCollector(event.Listener):
 
     def on_start(self, ev):
         if self.depth == 0:
-            if not _defined_in_core((ev.data or {}).get("dispatcher")):
+            if not defined_in_core((ev.data or {}).get("dispatcher")):
                 return
             self.saved = gc.get_threshold()
             gc.set_threshold(*COMPILATION_GC_THRESHOLD)
