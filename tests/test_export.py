@@ -13,6 +13,7 @@ import argparse
 import csv
 import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -31,6 +32,8 @@ from parsim.output.export import FORMATS, add_export_command, export_output, run
 from parsim.solvers.deposition import PARAMETERS as DEPOSITION_PARAMETERS
 from parsim.solvers.deposition_materials import particle_shape
 from tests.datasets import run_serial
+
+REPOSITORY = Path(__file__).resolve().parent.parent
 
 def ovito_import_file(path):
     """OVITO's reader; its wheel (Qt) needs the system's OpenGL, EGL and X11 client libraries, which
@@ -369,3 +372,20 @@ def test_an_out_path_with_a_trailing_slash_or_no_suffix_is_a_folder(outputs, tmp
     assert capsys.readouterr().out.split() == [str(folder / f"{first.stem}.csv"), str(folder / f"{first.stem}.xyz")]
     close(read_agglomerate(folder / f"{first.stem}.csv")[0], truth(first).position)
     assert len(ase.io.read(folder / f"{first.stem}.xyz")) == len(truth(first).position)
+
+
+def test_the_sample_lammps_input_of_the_docs_runs_as_printed(outputs, tmp_path):
+    """docs/export.md's sample input, its read_data pointed at a deposition's file, runs its
+    steps in LAMMPS with a finite temperature (without temp/sphere LAMMPS refuses the run)."""
+    text = (REPOSITORY / "docs" / "export.md").read_text()
+    sample = text.split("A sample LAMMPS input")[1].split("```text\n")[1].split("```")[0]
+    [path], _ = exported(outputs["deposition"], "lammps", tmp_path)
+    lmp = lammps.lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+    try:
+        for line in sample.splitlines():
+            command = line.split("#")[0].strip()
+            lmp.command(f"read_data {path}" if command.startswith("read_data") else command)
+        steps = int(sample.split("run")[-1].split()[0])
+        assert lmp.get_thermo("step") == steps and np.isfinite(lmp.get_thermo("temp"))
+    finally:
+        lmp.close()
