@@ -76,7 +76,8 @@ def worker(out, n, volume_fraction, steps):
     wall = comm.allreduce(time.perf_counter() - started, op=MPI.MAX)
     calls, sent, seconds = domain.traffic.totals()
     kernel = domain.traffic.kernel
-    rows = comm.gather({"minimiser": minimiser_seconds[0], "comm": sum(seconds.values()) - seconds.get("migration", 0.0),
+    communication = sum(seconds.values()) - seconds.get("migration", 0.0)
+    rows = comm.gather({"minimiser": minimiser_seconds[0], "comm": communication,
                         "bytes": {k: sent.get(k, 0) for k in KINDS}, "py_calls": sum(calls.values()),
                         "kernel_messages": float(kernel[kernel_mpi.MESSAGES]),
                         "kernel_bytes": float(kernel[kernel_mpi.BYTES]),
@@ -142,7 +143,8 @@ def main():
                        for key in ("wall", "minimiser")}
             it = max(s["iterations"], 1)
             sent = [s["bytes"][k] / s["steps"] / 1e6 for k in KINDS]
-            print(f"| {n} | {s['ranks']} | {per_step['wall']:.3g} | {speedup['wall']:.2f} | {per_step['minimiser']:.3g} "
+            print(f"| {n} | {s['ranks']} | {per_step['wall']:.3g} | {speedup['wall']:.2f} "
+                  f"| {per_step['minimiser']:.3g} "
                   f"| {speedup['minimiser']:.2f} | {per_step['comm']:.3g} | {per_step['comm'] / per_step['wall']:.1%} "
                   f"| {s['iterations'] / s['steps']:.0f} | {s['kernel_messages'] / it:.2f} "
                   f"| {s['kernel_bytes'] / it / 1e3:.3g} | {s['reductions'] / it:.2f} | {per_step['py_calls']:.0f} | "

@@ -4,6 +4,8 @@
                                               run (or resume) a job, on one rank or under mpiexec;
                                               K ranks run each task together (default 1)
     parsim validate JOB [--output DIR]        check a job file and its output location, compute nothing
+    parsim compile [JOB]                      compile the kernels a job needs (default: every solver's)
+                                              into the cache, e.g. on a login node before a batch job
     parsim info OUTPUT                        what an output folder holds and how far its job got
     parsim plot OUTPUT [--figure NAME] [--out PATH] [--task LABEL]
                                               the papers' figures from a job's outputs, PNG and PDF
@@ -91,6 +93,10 @@ def _parser() -> argparse.ArgumentParser:
     validate.add_argument("job", type=Path)
     validate.add_argument("--output", type=Path, help="output folder (overrides the job's 'output')")
 
+    compile_ = commands.add_parser("compile", help="compile the kernels of a job (default: of every solver) into "
+                                                   "numba's cache, so that the runs that follow only load them")
+    compile_.add_argument("job", type=Path, nargs="?", help="job file (TOML); without: every solver's kernels")
+
     info = commands.add_parser("info", help="describe an output folder")
     info.add_argument("output", type=Path, help="output folder of a job")
 
@@ -122,7 +128,7 @@ def _command(args) -> int:
     from parsim.output.export import run_export
 
     try:
-        return {"validate": _validate, "info": _info, "plot": _plot, "collect": _collect,
+        return {"validate": _validate, "compile": _compile, "info": _info, "plot": _plot, "collect": _collect,
                 "export": run_export}[args.command](args)
     except ParsimError as error:
         print(f"parsim: error: {error}", file=sys.stderr)
@@ -237,6 +243,29 @@ def _validate(args) -> int:
         folder.check(job, stored)
         done = int(folder.finished(job)[1].sum())
         print(f"{job.output} holds {done} of these tasks finished: {len(job.tasks()) - done} to compute")
+    return 0
+
+
+def _compile(args) -> int:
+    """Compile (or find in the cache) the kernels of the job's points, or of every solver, on this process."""
+    from parsim.core.cache import kernel_cache_dir
+    from parsim.job import Job, load_job
+    from parsim.runner import warm_up
+    from parsim.solvers import SOLVERS
+
+    if args.job is not None:
+        jobs = [load_job(args.job, SOLVERS)]
+    else:  # one small job per solver and method, with the defaults
+        small = {"n_spheres": 100, "volume_fraction": 0.1}
+        points = {"aggregation": [{"method": "ed", **small}, {"method": "ts", **small}],
+                  "deposition": [{"n_particles": 100}]}
+        jobs = [Job.from_dict({"name": "compile", "kind": kind, "seed": 1, "realizations": 1, "parameters": chosen},
+                              solvers=SOLVERS)
+                for kind in SOLVERS for chosen in points[kind]]
+    for job in jobs:
+        warm_up(job, job.tasks(), announce=True)
+    what = f"job '{jobs[0].name}'" if args.job is not None else "every solver"
+    print(f"the kernels of {what} are in the cache: {kernel_cache_dir()}")
     return 0
 
 

@@ -84,3 +84,24 @@ def test_the_python_api_speaks_of_the_kernels_only_when_it_compiles_them(tmp_pat
     assert first.returncode == 0 and second.returncode == 0, first.stderr + second.stderr
     assert "parsim: preparing the kernels" in first.stderr and "parsim: kernels ready in" in first.stderr
     assert "kernels" not in second.stderr, second.stderr
+
+
+def test_compile_fills_the_cache_that_a_run_then_loads(tmp_path):
+    """``parsim compile JOB`` (on a login node, before a batch job) compiles the job's kernels into
+    the cache; the run that follows compiles nothing and says nothing about kernels."""
+    job = tmp_path / "timing.toml"
+    job.write_text(JOB)
+    environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba_cache")}
+
+    def parsim(*arguments):
+        return subprocess.run([sys.executable, *parsim_command(*arguments)], capture_output=True, text=True,
+                              env=environment, timeout=900)
+
+    compiled = parsim("compile", str(job))
+    assert compiled.returncode == 0, compiled.stderr
+    assert "parsim: preparing the kernels" in compiled.stderr and "in the cache" in compiled.stdout
+    run = parsim("run", str(job), "--output", str(tmp_path / "out"))
+    assert run.returncode == 0, run.stderr
+    assert "kernels" not in run.stderr, run.stderr
+    again = parsim("compile", str(job))
+    assert "preparing the kernels" not in again.stderr and "in the cache" in again.stdout
