@@ -34,6 +34,7 @@ if __package__ in (None, ""):  # run as a script from a source tree
 
 from parsim.comparison import method_comparison  # noqa: E402
 from parsim.plots.aggregation import power_law  # noqa: E402
+from parsim.output.dataset import decoded  # noqa: E402
 from parsim.solver import flag_value  # noqa: E402
 
 REALIZATION = "realization"
@@ -101,7 +102,8 @@ def ts_against_ed(ds: xr.Dataset) -> None:
     rows = method_comparison(ds)
     errors = np.array([row["e(D_f)"] for row in rows])
     print(f"  e(D_f): largest {errors.max():.1%}, mean {errors.mean():.1%}")
-    ed, ts = ds.sel({"method": "ed"}), ds.sel({"method": "ts"})
+    named = decoded(ds, ["method"])  # the swept method is coded as CF flags
+    ed, ts = named.sel({"method": "ed"}), named.sel({"method": "ts"})
     for n in ds["n_spheres"].values:
         point = {"n_spheres": n}
         n_c = {method: part.contact_number.sel(point).mean(REALIZATION).values
@@ -121,9 +123,9 @@ def ts_against_ed(ds: xr.Dataset) -> None:
     print(f"  mean |D_x| per point: {float(d_x.min()):.3f} – {float(d_x.max()):.3f} (isotropic in 2D: 2/π = 0.637)")
     n = ds["n_spheres"].values.astype(np.float64)
     print("  mean task wall time [s] against N, and its least-squares exponent (the wall_time figure):")
-    for method in ds["method"].values:
+    for method in named["method"].values:
         for vf in ds["volume_fraction"].values:
-            mean = ds.wall_time.sel({"method": method, "volume_fraction": vf}).mean(REALIZATION).values
+            mean = named.wall_time.sel({"method": method, "volume_fraction": vf}).mean(REALIZATION).values
             fit = power_law(n, mean)
             times = ", ".join(f"{t:.3g}" for t in mean)
             exponent = f"; exponent {fit[0]:.2f}" if fit else ""

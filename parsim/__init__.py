@@ -1,7 +1,8 @@
 """parsim: piles and clusters of particles, simulated exactly and run as MPI ensembles.
 
 The Python interface (:mod:`parsim.api`, docs/python-api.md): :class:`Job` (``Job.from_dict``),
-:func:`load_job`, :func:`run`, :func:`deposit`, :func:`aggregate` and :class:`TaskOutcome`.
+:func:`load_job`, :func:`run`, :func:`deposit`, :func:`aggregate`, :class:`TaskOutcome`, and
+:func:`decoded` (a dataset's flag-coded coordinates by name).
 They are imported on first use, so that ``import parsim`` (which the command line does for
 its version) loads neither numpy nor MPI.
 """
@@ -16,7 +17,7 @@ except PackageNotFoundError:  # running from a source tree that was not installe
     __version__ = "0.0.0+unknown"
 
 _API = {"Job": "parsim.job", "load_job": "parsim.api", "run": "parsim.api", "deposit": "parsim.api",
-        "aggregate": "parsim.api", "TaskOutcome": "parsim.api"}
+        "aggregate": "parsim.api", "TaskOutcome": "parsim.api", "decoded": "parsim.output.dataset"}
 """Name of the Python interface -> the module that defines it."""
 
 __all__ = ["__version__", *_API]
@@ -24,6 +25,7 @@ __all__ = ["__version__", *_API]
 if TYPE_CHECKING:  # for editors and type checkers; at run time __getattr__ imports them
     from parsim.api import TaskOutcome, aggregate, deposit, load_job, run
     from parsim.job import Job
+    from parsim.output.dataset import decoded
 
 
 def __getattr__(name: str):

@@ -12,7 +12,8 @@ import sys
 import numpy as np
 import xarray as xr
 
-from parsim.solver import flag_value
+from parsim.output.dataset import decoded
+from parsim.solver import flag_value, named_values
 
 COLUMNS = ("n_spheres", "volume_fraction", "D_f ED", "D_f TS", "e(D_f)", "N_c ED", "N_c TS",
            "max dP/P_ED", "A_r ED", "A_r TS", "mean abs D_x ED", "mean abs D_x TS")
@@ -24,8 +25,9 @@ def method_comparison(dataset: xr.Dataset) -> list[dict]:
     ``max dP/P_ED`` is the largest relative difference of the mean P(r) over r; ``mean abs D_x`` the
     mean absolute x component of the orientation (2/pi = 0.64 for isotropic orientations in 2D).
     """
-    if "method" not in dataset.dims or not {"ed", "ts"} <= set(dataset["method"].values.tolist()):
+    if "method" not in dataset.dims or not {"ed", "ts"} <= set(named_values(dataset["method"])):
         raise ValueError("the dataset must have a 'method' dimension holding 'ed' and 'ts' (sweep method)")
+    dataset = decoded(dataset, ["method"])
     mean = dataset.mean("realization")
     ed, ts = mean.sel({"method": "ed"}), mean.sel({"method": "ts"})
     x_component = flag_value(dataset.component.attrs, "x")

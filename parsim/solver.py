@@ -8,6 +8,7 @@ Every solver in :mod:`parsim.solvers` is a :class:`Solver`; adding one needs no
 change to the scheduler, the output or the command line.
 """
 
+import re
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -47,6 +48,22 @@ def coded_coordinate(long_name: str, meanings: tuple[str, ...]) -> "Coordinate":
     values whose ``flag_meanings`` name them, since CF coordinates are numbers."""
     return Coordinate(np.arange(len(meanings), dtype="int8"), "1", f"{long_name} (coded: flag_meanings names each "
                       "flag_value)", attrs=flag_attributes(meanings))
+
+
+def flag_word(value: str) -> str:
+    """``value`` as one word of a CF ``flag_meanings``: letters, digits and ``_-.+@``, the other
+    characters replaced by ``_`` (a mesh file's path, say)."""
+    return re.sub(r"[^A-Za-z0-9_.+@-]", "_", str(value)) or "_"
+
+
+def named_values(coordinate) -> list:
+    """The values of an xarray coordinate, by name if it is coded as CF flags (a swept string
+    parameter, a Cartesian component, a species), else as they are."""
+    attrs = coordinate.attrs
+    if "flag_meanings" not in attrs:
+        return coordinate.values.tolist()
+    meaning = dict(zip(np.atleast_1d(attrs["flag_values"]).tolist(), attrs["flag_meanings"].split()))
+    return [meaning[value] for value in np.atleast_1d(coordinate.values).tolist()]
 
 
 def flag_value(attrs: dict, meaning: str) -> int:

@@ -50,6 +50,21 @@ trial_angle = [0.001, 0.01]
 """
 
 
+STRING_SWEEP = """
+name = "shapes"
+kind = "deposition"
+seed = 4
+realizations = 1
+[parameters]
+n_particles = 20
+box_length = 5.0
+profile_bins = 4
+packing_samples = 1000
+[sweep]
+shape = ["sphere", "rod"]
+"""
+
+
 def small_quickstart() -> str:
     """The quick start's job file with 16 and 36 discs and two realisations (12 tasks of a second)."""
     text = QUICKSTART.read_text()
@@ -93,7 +108,22 @@ def cf_failures(path: Path) -> list[str]:
     return failures + [f"the check {name} raised {error!r}" for name, (error, _) in raised.items()]
 
 
-@pytest.mark.parametrize("dataset", ["quickstart", "deposition"])
+@pytest.fixture(scope="module")
+def string_sweep(tmp_path_factory) -> Path:
+    return run(tmp_path_factory.mktemp("string_sweep"), STRING_SWEEP)
+
+
+@pytest.fixture(scope="module")
+def partial(quickstart) -> Path:
+    """The partial dataset of the small quick start (``parsim collect``): every statistic may have
+    missing tasks there, its integer ones included."""
+    collected = run_serial("collect", str(quickstart.parent))
+    assert collected.returncode == 0, collected.stderr
+    (path,) = quickstart.parent.glob("*.partial.nc")
+    return path
+
+
+@pytest.mark.parametrize("dataset", ["quickstart", "deposition", "string_sweep", "partial"])
 def test_the_checker_reports_no_error(dataset, request):
     failures = cf_failures(request.getfixturevalue(dataset))
     assert not failures, f"{CF} reports for the {dataset} dataset:\n" + "\n".join(failures)
@@ -221,3 +251,25 @@ def test_the_unit_keys_are_documented():
     reference = (Path(__file__).resolve().parent.parent / "docs" / "jobs.md").read_text()
     for unit in UNIT_KEYS:
         assert re.search(rf"\| `{unit.key}` \| string \| `\"{unit.default}\"` \|", reference), unit.key
+
+
+def test_a_swept_string_is_coded_by_flags_and_selected_by_name(string_sweep):
+    """A string sweep is an int8 coordinate whose flag_meanings name its values in the job's order;
+    parsim.decoded gives it back by name, for ``sel``."""
+    with xr.open_dataset(string_sweep) as dataset:
+        shape = dataset["shape"]
+        assert shape.dtype == np.int8 and shape.values.tolist() == [0, 1]
+        assert shape.attrs["flag_meanings"] == "sphere rod" and flag_value(shape.attrs, "rod") == 1
+        named = parsim.decoded(dataset)
+        assert named["shape"].values.tolist() == ["sphere", "rod"]
+        rods = named.sel(shape="rod")
+        assert np.array_equal(rods.bulk_packing_fraction.values, dataset.bulk_packing_fraction.isel(shape=1).values)
+
+
+def test_a_partial_dataset_keeps_integer_statistics_integer(partial, quickstart):
+    """Missing tasks of an integer statistic are its _FillValue, not NaN in a float copy: its
+    flag_values keep the variable's type (CF 3.5)."""
+    with xr.open_dataset(quickstart) as whole, netCDF4.Dataset(partial) as collected:
+        reason = collected["stop_reason"]
+        assert reason.dtype == np.int8 and reason.flag_values.dtype == np.int8
+        assert np.array_equal(reason[:], whole.stop_reason.values)

@@ -8,6 +8,7 @@ import xarray as xr
 
 from parsim.errors import JobError
 from parsim.job import load_job, parse_job
+from parsim.output.dataset import decoded
 from parsim.solvers import SOLVERS
 from tests.datasets import reproducible_part, run_serial, snapshot_arrays, unfinish
 from tests.mpi import parsim_command, run_mpi
@@ -79,10 +80,11 @@ def test_sediment_statistics_and_layout(two_ranks):
     _, two = two_ranks
     with xr.open_dataset(two / "sediments.nc") as ds:
         assert ds.packing_profile.dims == ("shape", "realization", "z_relative")
-        assert (ds.n_spheres.sel(shape="spiky") == 150 * 7).all() and (ds.n_spheres.sel(shape="cube") == 150 * 26).all()
+        named = decoded(ds, ["shape"])  # a swept string is coded as CF flags
+        assert (named.n_spheres.sel(shape="spiky") == 150 * 7).all() and (named.n_spheres.sel(shape="cube") == 150 * 26).all()
         # every particle is accounted for: on the floor, hanging, or resting on three contacts
         assert (ds.particles_on_floor > 0).all() and (ds.filling_height > 0).all()
-        assert (ds.bulk_packing_fraction.sel(shape="sphere") > 0.5).all()
+        assert (named.bulk_packing_fraction.sel(shape="sphere") > 0.5).all()
         # the parameters some task reads are scalar coordinates, those no task reads are not
         assert {"shape_size", "box_length", "sphere_radius", "trial_angle"} <= set(ds.coords)
         assert not {"shape_spacing", "semi_axis_x", "exponent_vertical", "shape_spheres", "agglomerate_file",

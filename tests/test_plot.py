@@ -17,6 +17,7 @@ import xarray as xr
 from parsim.cli import main
 from parsim.errors import PlotError
 from parsim.job import parse_job
+from parsim.output.dataset import decoded
 from parsim.output.collect import write_partial_dataset
 from parsim.output.dataset import all_statistics, build_dataset, row_layout, write_dataset
 from parsim.output.folder import OutputFolder
@@ -199,7 +200,7 @@ def test_a_figure_without_its_variable_names_it(deposition_output, tmp_path, cap
 
 def test_the_error_figure_needs_both_methods(aggregation_output):
     with pytest.raises(PlotError, match="dimension 'method' holding 'ed' and 'ts'"):
-        aggregation.fractal_error(open_dataset(aggregation_output).sel({"method": "ts"}))
+        aggregation.fractal_error(decoded(open_dataset(aggregation_output), ["method"]).sel({"method": "ts"}))
 
 
 def test_an_unknown_figure_lists_the_allowed_ones(aggregation_output, capsys):

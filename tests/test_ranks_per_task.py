@@ -13,6 +13,7 @@ from mpi4py import MPI
 
 from parsim.errors import OutputError
 from parsim.job import parse_job
+from parsim.output.dataset import decoded
 from parsim.output.snapshot import parts_folder, read_configuration
 from parsim.solvers import SOLVERS
 from tests.datasets import reproducible_part, run_serial, snapshot_arrays
@@ -255,7 +256,8 @@ def test_ts_and_ed_job_on_groups_of_two(tmp_path):
     for name in ("n_events", "n_collisions", "n_minimisations", "n_minimiser_iterations", "n_wall_reflections"):
         assert (one_rank[name] == two_ranks[name]).all(), name
     with xr.open_dataset(four / "groups_ts.nc") as ds:
-        ts, ed = ds.sel({"method": "ts"}), ds.sel({"method": "ed"})
+        named = decoded(ds, ["method"])
+        ts, ed = named.sel({"method": "ts"}), named.sel({"method": "ed"})
         assert (ds.n_clusters == 1).all() and (ds.n_collisions == 63).all()
         assert (ts.n_minimisations > 0).all() and (ed.rank_imbalance == 1.0).all()
         assert np.isfinite(ts.rank_imbalance).all() and (ts.rank_imbalance >= 1.0).all()

@@ -24,10 +24,13 @@ from parsim.job import Job
 from parsim.output.atomic import write_bytes_atomically
 from parsim.output.rows import RowLayout
 from parsim.output.snapshot import check_schema, provenance_attributes
-from parsim.solver import Solver, Statistic, resolve_units
+from parsim.solver import Solver, Statistic, coded_coordinate, flag_word, named_values, resolve_units
 
 WALL_TIME = Statistic("wall_time", "s", "wall-clock time of the task on its rank", measured=True)
 """Measured by the runner for every task, whatever the solver."""
+
+MISSING_INTEGER = -1
+"""An integer statistic's value for a task that has not finished, in a partial dataset (its _FillValue)."""
 
 MEASURED_ATTRIBUTE = "parsim_measured"
 """Set to 1 on variables that are timings and so differ between two runs of one job."""
@@ -87,21 +90,53 @@ def _statistics_variables(job: Job, solver: Solver, rows: np.ndarray, partial: b
     variables = {}
     for s in all_statistics(solver):
         column = rows[s.name][np.maximum(index, 0)] if len(rows) else np.zeros((len(index), *rows.dtype[s.name].shape))
+        encoding = {}
         if partial:
-            column = column.astype(np.float64)
-            column[missing] = np.nan
+            column, encoding = _with_missing(column, missing)
         attrs = {**_described(job, s.units, s.long_name), **s.attrs}
         if s.measured:
             attrs[MEASURED_ATTRIBUTE] = 1
         variables[s.name] = xr.Variable(leading_dims + s.dims, column.reshape(leading_shape + column.shape[1:]),
-                                        attrs)
+                                        attrs, encoding=encoding)
     return variables
 
 
+def _with_missing(column: np.ndarray, missing: np.ndarray) -> tuple[np.ndarray, dict]:
+    """``column`` with the tasks that have no row marked missing, and its netCDF encoding: integers
+    keep their type (a flag variable's ``flag_values`` share it, CF 3.5) with ``MISSING_INTEGER`` as
+    ``_FillValue``; other values become float64 NaN."""
+    if np.issubdtype(column.dtype, np.integer):
+        column = column.copy()
+        column[missing] = MISSING_INTEGER
+        return column, {"_FillValue": column.dtype.type(MISSING_INTEGER)}
+    column = column.astype(np.float64)
+    column[missing] = np.nan
+    return column, {}
+
+
+def decoded(dataset: xr.Dataset, names=None) -> xr.Dataset:
+    """``dataset`` with its coordinates coded as CF flags (``names``; default: every such dimension
+    coordinate: swept strings, components, species) holding their names instead, so that
+    ``decoded(dataset).sel({"method": "ts"})`` selects by name (``sel(method=...)`` would be a keyword
+    of ``sel``)."""
+    names = [name for name in dataset.dims if name in dataset.coords and "flag_meanings" in dataset[name].attrs] \
+        if names is None else list(names)
+    return dataset.assign_coords({name: (dataset[name].dims, named_values(dataset[name]),
+                                         {"long_name": dataset[name].attrs.get("long_name", name)})
+                                  for name in names})
+
+
 def _sweep_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
-    """The swept parameters' values and ``realization``: the leading dimensions."""
-    coords = {name: _coordinate(name, np.asarray(values), _parameter_attributes(job, solver, name))
-              for name, values in job.sweep.items()}
+    """The swept parameters' values and ``realization``: the leading dimensions.  A swept string
+    parameter is coded as CF flags, 0, 1, ... in the job's order (CF coordinates are numbers);
+    :func:`decoded` names them again."""
+    coords = {}
+    for name, values in job.sweep.items():
+        values, attrs = np.asarray(values), _parameter_attributes(job, solver, name)
+        if values.dtype.kind in "USO":
+            coded = coded_coordinate(attrs["long_name"], tuple(flag_word(value) for value in values))
+            values, attrs = coded.values, {"units": coded.units, "long_name": coded.long_name, **coded.attrs}
+        coords[name] = _coordinate(name, values, attrs)
     coords["realization"] = _coordinate("realization", np.arange(job.realizations),
                                         {"standard_name": "realization", "long_name": "realisation index",
                                          "units": "1"})

@@ -13,7 +13,7 @@ from parsim.plots.common import (REALIZATION, axis_label, curves, draw_curve, en
                                  legend, new_figure, panels, position_label, read_snapshot, task_text,
                                  titled)
 from parsim.plots.render import distinct_colours, render_spheres
-from parsim.solver import flag_value
+from parsim.solver import flag_value, named_values
 
 FIGURES: dict = {}
 N_LABEL = "number of spheres $N$"
@@ -95,7 +95,7 @@ def fractal_dimension(dataset: xr.Dataset) -> Figure:
 def _both_methods(dataset: xr.Dataset) -> list[str]:
     """What :func:`method_comparison` needs beyond its variables."""
     needs = []
-    if "method" not in dataset.dims or not {"ed", "ts"} <= set(dataset["method"].values.tolist()):
+    if "method" not in dataset.dims or not {"ed", "ts"} <= set(named_values(dataset["method"])):
         needs.append("a dimension 'method' holding 'ed' and 'ts' (sweep method = [\"ed\", \"ts\"])")
     needs += [f"coordinate {name!r}" for name in ("n_spheres", "volume_fraction") if name not in dataset.coords]
     other = set(dataset.fractal_dimension.dims) - COMPARED_DIMS
