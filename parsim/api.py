@@ -161,6 +161,16 @@ class TaskOutcome:
             write_task_file(folder.task_path(task), self.result, task_attributes(self.job, task))
             return export_output(folder.root, format, out=Path(path))
 
+    def voxelize(self, voxel_size: float, height: float | None = None):
+        """The configuration as a solid/void voxel image (:class:`parsim.output.voxels.VoxelImage`,
+        ``void`` True in pore space, as porespy and OpenPNM take it), as ``parsim export --format
+        voxels`` writes it: voxels of about ``voxel_size``, up to ``height`` above the floor
+        (default: the top of the highest sphere), periodic sides wrapped."""
+        from parsim.output.export import task_spheres
+        from parsim.output.voxels import voxelize
+
+        return voxelize(task_spheres(self.configuration, self.job.tasks()[0].label), voxel_size, height)
+
     def __repr__(self) -> str:
         fixed = ", ".join(f"{name}={value!r}" for name, value in self.job.fixed.items()
                           if value != _defaults(self.job.kind).get(name))

@@ -345,7 +345,7 @@ def test_command_writes_the_chosen_task_into_the_export_folder(outputs, tmp_path
 
 
 @pytest.mark.parametrize("arguments, message", [
-    (["--format", "pdb"], "unknown export format 'pdb'; allowed: extxyz, lammps, vtk, csv, yade, particles"),
+    (["--format", "pdb"], "unknown export format 'pdb'; allowed: extxyz, lammps, vtk, csv, yade, particles, voxels"),
     (["--format", "csv", "--task", "0123456789abcdef_r0000"], "no task '0123456789abcdef_r0000' in "),
     (["--format", "particles"], "format 'particles' is the particle table of a deposition, and {task} is an "
                                 "aggregation task; its clusters have no orientation: use one of extxyz, lammps, "

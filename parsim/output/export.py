@@ -26,9 +26,10 @@ docs/export.md for the commands that load each file.
 """
 
 import argparse
+import functools
 import io
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 from xml.sax.saxutils import quoteattr
@@ -38,6 +39,7 @@ import numpy as np
 import parsim
 from parsim.errors import JobError, OutputError
 from parsim.output.atomic import written_atomically
+from parsim.output.voxels import write_voxels
 
 EXPORT_FOLDER = "export"
 REAL = "%.17g"
@@ -89,10 +91,17 @@ def read_task(path: Path) -> TaskSpheres:
         raise OutputError(f"cannot read task file {path}: {error}") from None
     check_schema(configuration.attrs, f"task file {path}", path.parent.parent)
     arrays = configuration.arrays
-    found = [name for name in BODY_ARRAYS if name in arrays]
-    if "spheres/position" not in arrays or "spheres/radius" not in arrays or not found:
+    if "spheres/position" not in arrays or "spheres/radius" not in arrays or not any(map(arrays.__contains__,
+                                                                                       BODY_ARRAYS)):
         raise OutputError(f"task file {path} lacks spheres/position, spheres/radius and spheres/particle "
                           "or spheres/cluster: it is not a deposition or aggregation task file")
+    return task_spheres(configuration, path.stem)
+
+
+def task_spheres(configuration, label: str) -> TaskSpheres:
+    """The spheres of a :class:`parsim.solver.Configuration` (a task file's, or a task's in memory)."""
+    arrays = configuration.arrays
+    found = [name for name in BODY_ARRAYS if name in arrays]
     kind, body_name = BODY_ARRAYS[found[0]]
     position = np.asarray(arrays["spheres/position"], dtype=np.float64)
     radius = np.asarray(arrays["spheres/radius"], dtype=np.float64)
@@ -105,7 +114,7 @@ def read_task(path: Path) -> TaskSpheres:
         position = np.column_stack([position, np.zeros(len(position))])
         lower, upper = np.append(lower, -thickness), np.append(upper, thickness)
         periodic = np.append(periodic, False)
-    return TaskSpheres(label=path.stem, kind=kind, dimension=dimension, position=position, radius=radius,
+    return TaskSpheres(label=label, kind=kind, dimension=dimension, position=position, radius=radius,
                        body=np.asarray(arrays[found[0]], dtype=np.int64), body_name=body_name, box_lower=lower,
                        box_upper=upper, periodic=periodic, arrays=arrays, attrs=configuration.attrs)
 
@@ -343,6 +352,8 @@ FORMATS: dict[str, Format] = {
     "csv": Format(".csv", write_csv, "parsim agglomerate_file, spreadsheets"),
     "yade": Format(".txt", write_yade, "YADE ymport.textExt, ymport.textClumps"),
     "particles": Format("_particles.csv", write_particles, "multi-sphere DEM codes, deposition only"),
+    "voxels": Format("_voxels.npy", write_voxels, "porespy, OpenPNM (numpy); image tools (.raw + .json, .tif); "
+                     "3-D tasks, with --voxel-size"),
 }
 
 
@@ -360,18 +371,24 @@ def _job_folder(output: Path) -> tuple[str, list[Path]]:
 
 
 def export_output(output: Path, format: str, task: str | None = None, all_tasks: bool = False,
-                  out: Path | None = None) -> list[Path]:
+                  out: Path | None = None, voxel_size: float | None = None, height: float | None = None) -> list[Path]:
     """Export the task ``task`` (default: the job's first task that has a task file) or every task of the
     job in ``output`` as ``format``; the files written.
 
     ``out`` is, for one task, the file to write or a folder to write LABEL + the format's suffix
     in (an existing folder, a path ending in a slash, or a name without a suffix; created if need
     be); for every task, the folder (both default to OUTPUT/export).  A ``vtk`` export of every
-    task also writes JOB.pvd, the collection ParaView opens as one series.
+    task also writes JOB.pvd, the collection ParaView opens as one series.  ``voxel_size`` and
+    ``height`` are those of format ``voxels`` (:mod:`parsim.output.voxels`).
     """
     if format not in FORMATS:
         raise JobError(f"unknown export format {format!r}; allowed: {', '.join(FORMATS)}")
     spec = FORMATS[format]
+    options = {name: value for name, value in (("voxel_size", voxel_size), ("height", height)) if value is not None}
+    if format == "voxels":
+        spec = replace(spec, write=functools.partial(spec.write, **options))
+    elif options:
+        raise JobError(f"--voxel-size and --height are options of format 'voxels', not {format!r}")
     output = Path(output)
     job_name, files = _job_folder(output)
     if all_tasks:
@@ -422,6 +439,11 @@ def add_export_command(subparsers) -> None:
     which.add_argument("--all", action="store_true", help="export every task (vtk: with a .pvd collection)")
     export.add_argument("--format", required=True, metavar="FORMAT",
                         help="; ".join(f"{name} ({spec.readers})" for name, spec in FORMATS.items()))
+    export.add_argument("--voxel-size", type=float, metavar="S",
+                        help="format voxels: the voxels' edge, in the task's length unit")
+    export.add_argument("--height", type=float, metavar="H",
+                        help="format voxels: the image's height above the floor (default: the top of the highest "
+                             "sphere)")
     export.add_argument("--out", metavar="PATH",
                         help="the file to write, or a folder to write LABEL.suffix in (an existing folder, DIR/ "
                              "or a name without a suffix; default OUTPUT/export); with --all, the folder "
@@ -430,6 +452,7 @@ def add_export_command(subparsers) -> None:
 
 def run_export(args: argparse.Namespace) -> int:
     """``parsim export``: write the files and print their paths; errors are one-line ParsimErrors."""
-    for path in export_output(args.output, args.format, task=args.task, all_tasks=args.all, out=args.out):
+    for path in export_output(args.output, args.format, task=args.task, all_tasks=args.all, out=args.out,
+                              voxel_size=args.voxel_size, height=args.height):
         print(path)
     return 0
