@@ -211,6 +211,7 @@ def _solve_one_task(kind: str, name: str, seed: int, parameters: dict[str, Any])
     from mpi4py import MPI
 
     from parsim.output.dataset import build_dataset, row_layout
+    from parsim.progress import reporting_settled, settled_bar
     from parsim.runner import solve_task
     from parsim.solvers import SOLVERS
 
@@ -220,7 +221,8 @@ def _solve_one_task(kind: str, name: str, seed: int, parameters: dict[str, Any])
                          "parameters": parameters}, source=f"parsim.{name}")
     _prepare_kernels(job)
     task = job.tasks()[0]
-    result = solve_task(job, task, MPI.COMM_SELF)
+    with settled_bar(f"parsim.{name}") as bar, reporting_settled(bar):
+        result = solve_task(job, task, MPI.COMM_SELF)
     rows = row_layout(job, SOLVERS[kind]).rows([(task, result.statistics)])
     dataset = build_dataset(job, SOLVERS[kind], rows, mpi_size=1, ranks_per_task=1)
     return TaskOutcome(job=job, result=result, statistics=dataset.isel(realization=0))

@@ -166,3 +166,57 @@ def preparing(what: str, estimated_seconds: float, clock=time.monotonic):
         done.set()
         reporter.join()
     print(f"parsim: {what}: done in {tqdm.format_interval(clock() - start)}", file=sys.stderr, flush=True)
+
+
+_settling = [None]  # report(done, total) of the task this process runs (:func:`reporting_settled`)
+
+
+@contextmanager
+def reporting_settled(report):
+    """Within the block, a task's long loop (a deposition's particles) tells ``report(done, total)``
+    how far it got, every few seconds (:func:`settled_reporter`)."""
+    before = _settling[0]
+    _settling[0] = report
+    try:
+        yield
+    finally:
+        _settling[0] = before
+
+
+def settled_reporter(total: int):
+    """The ``progress(done)`` callback of a loop over ``total`` items under :func:`reporting_settled`, or None."""
+    report = _settling[0]
+    return None if report is None else (lambda done: report(done, total))
+
+
+def settled_lines(what: str, clock=time.monotonic):
+    """A ``report(done, total)`` that prints ``parsim: WHAT: done of total particles settled (x %),
+    elapsed`` on standard error, above a progress bar if one is drawn (:func:`tqdm.write`)."""
+    start = clock()
+
+    def report(done: int, total: int) -> None:
+        if done < total:
+            tqdm.write(f"parsim: {what}: {done:,} of {total:,} particles settled ({done / max(total, 1):.0%}, "
+                       f"{tqdm.format_interval(clock() - start)} elapsed)", file=sys.stderr)
+
+    return report
+
+
+@contextmanager
+def settled_bar(what: str):
+    """A ``report(done, total)`` drawing a tqdm bar (``tqdm.auto``: a widget in a notebook) once the
+    first report comes, closed with the block."""
+    from tqdm.auto import tqdm as auto_tqdm
+
+    bar = []
+
+    def report(done: int, total: int) -> None:
+        if not bar:
+            bar.append(auto_tqdm(total=total, desc=what, unit=" particles", file=sys.stderr))
+        bar[0].update(done - bar[0].n)
+
+    try:
+        yield report
+    finally:
+        if bar:
+            bar[0].close()

@@ -42,7 +42,8 @@ from parsim.output.rows import RowWriter
 from parsim.output.snapshot import provenance_attributes, write_task_file
 from parsim.parallel.collective import on_root, wait_for
 from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
-from parsim.progress import TaskProgress, announcing_compilation, announcing_preparation
+from parsim.progress import (TaskProgress, announcing_compilation, announcing_preparation, reporting_settled,
+                             settled_lines)
 from parsim.solver import TaskResult
 
 
@@ -82,7 +83,7 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
                           "and the dataset is this job's; it is left as it is", file=sys.stderr, flush=True)
                 return folder.dataset, True
             done, computing = _run_pending(job, pending, folder, writing, comm, progress and rank == 0,
-                                           ranks_per_task, limit)
+                                           ranks_per_task, limit, settling=progress)
             wait_for(comm.Ibarrier())  # every rank has closed its row file before rank 0 reads them
             start = time.perf_counter()
             outputs = on_root(comm, lambda: _write_outputs(job, folder, comm.Get_size(), ranks_per_task))
@@ -116,8 +117,10 @@ def _claim(job: Job, folder: OutputFolder, lock: FolderLock) -> list[Task]:
 
 
 def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: threading.Lock, comm: MPI.Comm,
-                 progress: bool, ranks_per_task: int, time_limit: TimeLimit | None) -> tuple[int, float]:
-    """Run the ``pending`` tasks; on rank 0, how many finished and in how many seconds (after the warm-up)."""
+                 progress: bool, ranks_per_task: int, time_limit: TimeLimit | None,
+                 settling: bool = False) -> tuple[int, float]:
+    """Run the ``pending`` tasks; on rank 0, how many finished and in how many seconds (after the warm-up).
+    ``progress``: this rank draws the job's bar; ``settling``: this rank's long tasks say how far they got."""
     solver = job.solver
     warm_up(job, pending, progress, comm)
     point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
@@ -136,7 +139,9 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
                 return  # a serial solver runs on the group's rank 0; the others wait for the next task
             group = MPI.COMM_SELF
         task = pending[k]
-        result = solve_task(job, task, group)
+        where = f"task {task.label}" + (f" on rank {comm.Get_rank()}" if comm.Get_rank() else "")
+        with reporting_settled(settled_lines(where) if settling and group.Get_rank() == 0 else None):
+            result = solve_task(job, task, group)
         if result is None:
             return  # the task's result is on the group's rank 0
         with writing:

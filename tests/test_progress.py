@@ -58,3 +58,31 @@ def test_a_run_whose_output_is_not_a_terminal_writes_plain_progress_lines(tmp_pa
     assert result.returncode == 0, result.stderr
     assert "\r" not in result.stderr
     assert "lines 3/3 tasks, " in result.stderr and " left" in result.stderr
+
+
+def test_a_long_deposition_says_how_many_particles_have_settled(monkeypatch, capsys):
+    """While the kernel runs, its count of settled particles reaches a thread every
+    PROGRESS_SECONDS (made short here): the counts grow, and the last is every particle; the
+    Python API draws them as a bar, a run's tasks as log lines."""
+    import numpy as np
+
+    import parsim
+    from parsim.core import sdbd
+    from parsim.progress import reporting_settled, settled_lines, settled_reporter
+
+    monkeypatch.setattr(sdbd, "PROGRESS_SECONDS", 0.002)
+    n = 20_000
+    rng = np.random.default_rng(1)
+    heard = []
+    sdbd.deposit(np.zeros((1, 3)), np.array([0.5]), np.array([0, 1]), np.zeros(n, dtype=np.int64), np.ones(n),
+                 np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), rng.random((n, 2)) * 20.0, (0.0, 0.0), (20.0, 20.0),
+                 sdbd.LATERAL_PERIODIC, sdbd.FLOOR_ROLL, progress=heard.append)
+    assert len(heard) > 2 and heard == sorted(heard) and heard[-1] == n and 0 < heard[0] < n
+    parsim.deposit(n_particles=5000, seed=1, shape="sphere", box_length=20.0)
+    assert "parsim.deposit: 100%" in capsys.readouterr().err
+    with reporting_settled(settled_lines("task abc")):  # as a run's rank reports its task
+        sdbd.deposit(np.zeros((1, 3)), np.array([0.5]), np.array([0, 1]), np.zeros(n, dtype=np.int64), np.ones(n),
+                     np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), rng.random((n, 2)) * 20.0, (0.0, 0.0), (20.0, 20.0),
+                     sdbd.LATERAL_PERIODIC, sdbd.FLOOR_ROLL, progress=settled_reporter(n))
+    lines = capsys.readouterr().err
+    assert "parsim: task abc: " in lines and " of 20,000 particles settled (" in lines

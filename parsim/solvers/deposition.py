@@ -28,6 +28,7 @@ from parsim.core.sediment import MAX_POINTS_PER_CAP
 from parsim.errors import JobError, NumericalError
 from parsim.machine import check_memory
 from parsim.parameters import LARGEST_QUANTITY, REQUIRED, Parameter
+from parsim.progress import settled_reporter
 from parsim.solver import LENGTH_UNITS, Configuration, Solver, TableArray, TaskResult
 from parsim.solvers import deposition_statistics as statistics
 from parsim.solvers.deposition_materials import (
@@ -488,7 +489,8 @@ def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
         chunks = _particle_chunks(params, species, geometry, rng, PARTICLE_CHUNK)
         return _solve_spread(comm, params, chunks, shapes, container, options, species, geometry, skip, substrate)
     drops, rotation, drop_xy = next(_particle_chunks(params, species, geometry, rng, max(n, 1))())
-    result = sdbd.deposit(*shapes, drops.species, drops.scale, rotation, drop_xy, *container, **options)
+    result = sdbd.deposit(*shapes, drops.species, drops.scale, rotation, drop_xy, *container, **options,
+                          progress=settled_reporter(n))
     _check_sediment(params, result.stopped_at, np.all(np.isfinite(result.positions)))
     return TaskResult(statistics.measure(params, result, species, drops, geometry, skip, substrate),
                       _configuration(params, geometry, result, species, drops, substrate))

@@ -88,6 +88,8 @@ The numba cache of every kernel is stamped with all of :mod:`parsim.core`'s sour
 :mod:`.rotation` recompiles :func:`engine.run_deposition`.
 """
 
+import contextlib
+import threading
 from typing import NamedTuple
 
 import numpy as np
@@ -141,6 +143,9 @@ __all__ = [
     "MAX_EVENT_LIMIT",
 ]
 
+#: How often a deposition's ``progress`` hears how many particles have settled.
+PROGRESS_SECONDS = 5.0
+
 
 class DepositionResult(NamedTuple):
     """Outcome of :func:`deposit` (only the particles deposited before ``stopped_at``).
@@ -183,7 +188,7 @@ def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_sc
             particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
             trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
             clock_from_particle=-1, wall_contact=WALL_FRICTIONLESS, container=CONTAINER_BOX, cylinder=None,
-            substrate_positions=None, substrate_radii=None):
+            substrate_positions=None, substrate_radii=None, progress=None):
     """Deposit particles one after the other by steepest descent; see the module docs.
 
     Parameters
@@ -240,13 +245,43 @@ def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_sc
         like the deposited spheres, never moving.  Centres at ``z >= 0``; with walls each
         sphere lies inside the box or the cylinder's polygon; a periodic box wraps them.
         They are not part of the result.
+    progress : callable, optional
+        Called as ``progress(settled)`` with the particles settled so far, from another thread,
+        every ``PROGRESS_SECONDS`` while the run goes on (the kernel releases the GIL), and once
+        at its end.
     """
     return deposit_with_diagnostics(
         shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
         particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
         trial_angle, cycle_n, cycle_eps, max_events_per_particle,
         clock_from_particle=clock_from_particle, wall_contact=wall_contact, container=container,
-        cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii)[0]
+        cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii,
+        progress=progress)[0]
+
+
+@contextlib.contextmanager
+def _reporting(progress, counts, index):
+    """While the block runs, call ``progress(int(counts[index]))`` every ``PROGRESS_SECONDS`` from a
+    thread, and once when it ends (not when it fails)."""
+    if progress is None:
+        yield
+        return
+    done = threading.Event()
+
+    def report():
+        while not done.wait(PROGRESS_SECONDS):
+            settled = counts[index]
+            if settled == settled:  # not NaN: the first particle has settled
+                progress(int(settled))
+
+    reporter = threading.Thread(target=report, name="parsim-deposition-progress", daemon=True)
+    reporter.start()
+    try:
+        yield
+    finally:
+        done.set()
+        reporter.join()
+    progress(int(np.nan_to_num(counts[index])))
 
 
 def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_shape,
@@ -255,7 +290,8 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
                              cycle_eps=1e-3, max_events_per_particle=100_000, clock_from_particle=-1,
                              wall_contact=WALL_FRICTIONLESS, check_overlaps=False,
                              trace_particle=-1, trace_steps=0, container=CONTAINER_BOX, cylinder=None,
-                             substrate_positions=None, substrate_radii=None, count=False, record_reads=False):
+                             substrate_positions=None, substrate_radii=None, count=False, record_reads=False,
+                             progress=None):
     """:func:`deposit` plus a dict of diagnostics, for tests and benchmarks.
 
     With ``check_overlaps`` the kernel measures, after every move, the largest overlap of
@@ -290,15 +326,16 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     out_state = np.zeros(P, dtype=np.int8)
     out_events = np.zeros((P, N_EVENT_KINDS), dtype=np.int32)
     out_steps = np.zeros(P, dtype=np.int32)
-    diag = np.full(4, np.nan)
+    diag = np.full(engine.N_DIAGNOSTICS, np.nan)
     trace = np.full((max(int(trace_steps), 1), 16), np.nan)
     counts = np.zeros(counters.N_COUNTERS if count else 0, dtype=np.int64)
     reads_out = np.zeros((P if record_reads else 0, reads.N_READS))
-    stopped_at, n_written = engine.run_deposition(
-        *prep.kernel_inputs(), prep.substrate_positions, prep.substrate_radii, *g, *prep.kernel_settings(),
-        bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), sediment_centre,
-        sediment_radius, out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag,
-        counts, reads_out)
+    with _reporting(progress, diag, engine.D_SETTLED):
+        stopped_at, n_written = engine.run_deposition(
+            *prep.kernel_inputs(), prep.substrate_positions, prep.substrate_radii, *g, *prep.kernel_settings(),
+            bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), sediment_centre,
+            sediment_radius, out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag,
+            counts, reads_out)
     n_done = P if stopped_at < 0 else int(stopped_at)
     return DepositionResult(
         positions=sediment_centre[n_sub:n_sub + n_written],

@@ -96,6 +96,8 @@ D_MAX_OVERLAP = 0      # largest overlap seen after a move (debug), units of len
 D_EVENTS = 1           # decide/move steps, all particles
 D_CHUNKS = 2           # chunk ends (bookkeeping steps)
 D_CLOCKED_SECONDS = 3  # wall-clock seconds from the start of particle clock_from to the end
+D_SETTLED = 4          # particles settled so far, written as the run goes (read by a progress thread)
+N_DIAGNOSTICS = 5
 
 
 @jit
@@ -120,8 +122,9 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     spheres in the lab frame (a periodic box holds each centre of mass wrapped into it and the
     spheres about it, a sphere beyond the box included), so that the sediment is not kept
     twice.  ``out_*`` are preallocated outputs for all particles (a :class:`.bundles.Record`);
-    ``diag`` (4,) receives diagnostics
-    (largest overlap after a move when ``debug``, number of steps, number of chunk steps).
+    ``diag`` (N_DIAGNOSTICS,) receives diagnostics
+    (largest overlap after a move when ``debug``, number of steps, number of chunk steps), and
+    ``diag[D_SETTLED]`` the particles settled so far, as the run goes.
     The steps of particle ``trace_particle`` (``-1``: none) are recorded in the rows of
     ``trace`` (T, 16): motion, number of contacts before the step, pivot contacts k and m,
     first executed event kind, angle or drop, number of executed events, centre of mass
@@ -199,6 +202,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
         n_beyond, beyond_index, beyond_centre = _note_wrapped(n, particle, sediment, n_sed, n_beyond,
                                                               beyond_index, beyond_centre)
         counters.stop(tallies, counters.PARTICLE, started)
+        diag[D_SETTLED] = p + 1
     counters.stop(tallies, counters.TOTAL, run_started)
     for b in range(n_beyond):  # the sediment is done: its spheres as the particles hold them
         for k in range(3):
