@@ -19,11 +19,12 @@ elapsed (:func:`preparing`).
 
 import math
 import sys
-import threading
 import time
 from contextlib import contextmanager
 
 from tqdm import tqdm
+
+from parsim.core.ticker import ticking
 
 #: Seconds between two progress lines when standard error is not a terminal.
 LOG_INTERVAL = 5.0
@@ -152,19 +153,13 @@ def preparing(what: str, estimated_seconds: float, clock=time.monotonic):
         yield
         return
     print(f"parsim: {what} (about {tqdm.format_interval(estimated_seconds)})...", file=sys.stderr, flush=True)
-    start, done = clock(), threading.Event()
+    start = clock()
 
     def report() -> None:
-        while not done.wait(PREPARATION_INTERVAL):
-            print(f"parsim: {what}: {tqdm.format_interval(clock() - start)} elapsed", file=sys.stderr, flush=True)
+        print(f"parsim: {what}: {tqdm.format_interval(clock() - start)} elapsed", file=sys.stderr, flush=True)
 
-    reporter = threading.Thread(target=report, name="parsim-preparation", daemon=True)
-    reporter.start()
-    try:
+    with ticking(PREPARATION_INTERVAL, report, "parsim-preparation"):
         yield
-    finally:
-        done.set()
-        reporter.join()
     print(f"parsim: {what}: done in {tqdm.format_interval(clock() - start)}", file=sys.stderr, flush=True)
 
 

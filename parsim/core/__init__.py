@@ -1,4 +1,5 @@
 """Jitted kernels: plain numpy arrays in, plain numpy arrays out.
 
-No MPI, no files, no printing: the core never imports from the rest of parsim.
+No files, no printing, no mpi4py: the core never imports from the rest of parsim (the jitted
+exchanges of :mod:`parsim.core.kernel_mpi` call the MPI library that the parallel layer binds).
 """

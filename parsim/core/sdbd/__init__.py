@@ -89,7 +89,6 @@ The numba cache of every kernel is stamped with all of :mod:`parsim.core`'s sour
 """
 
 import contextlib
-import threading
 from typing import NamedTuple
 
 import numpy as np
@@ -115,6 +114,7 @@ from parsim.core.sdbd.constants import (
     WALL_FRICTIONLESS,
     WALL_GLUED,
 )
+from parsim.core.ticker import ticking
 
 __all__ = [
     "deposit",
@@ -266,21 +266,14 @@ def _reporting(progress, counts, index):
     if progress is None:
         yield
         return
-    done = threading.Event()
 
     def report():
-        while not done.wait(PROGRESS_SECONDS):
-            settled = counts[index]
-            if settled == settled:  # not NaN: the first particle has settled
-                progress(int(settled))
+        settled = counts[index]
+        if settled == settled:  # not NaN: the first particle has settled
+            progress(int(settled))
 
-    reporter = threading.Thread(target=report, name="parsim-deposition-progress", daemon=True)
-    reporter.start()
-    try:
+    with ticking(PROGRESS_SECONDS, report, "parsim-deposition-progress"):
         yield
-    finally:
-        done.set()
-        reporter.join()
     progress(int(np.nan_to_num(counts[index])))
 
 
