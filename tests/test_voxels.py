@@ -79,3 +79,13 @@ def test_the_export_writes_the_image_numpy_and_raw_bytes_alike(tmp_path):
         export_output(tmp_path / "out", "voxels", out=tmp_path / "images/")
     with pytest.raises(JobError, match="options of format 'voxels'"):
         export_output(tmp_path / "out", "csv", out=tmp_path / "images/", voxel_size=0.25)
+
+
+def test_voxels_outside_a_cylinder_are_solid():
+    """An empty cylinder of radius 2 in its 4 x 4 box: the pore space is its disc, pi r^2 of 16."""
+    empty = TaskSpheres(label="empty", kind="deposition", dimension=3, position=np.zeros((0, 3)), radius=np.zeros(0),
+                        body=np.zeros(0, dtype=np.int64), body_name="particle", box_lower=np.zeros(3),
+                        box_upper=np.full(3, 4.0), periodic=np.zeros(3, dtype=bool), arrays={},
+                        attrs={"container": "cylinder", "container_radius": 2.0})
+    image = voxelize(empty, 0.02, height=0.1)
+    assert abs(porespy.metrics.porosity(image.void) - np.pi * 4.0 / 16.0) < 1e-3
