@@ -14,6 +14,7 @@ size, the ranks per task and the creation time.
 """
 
 import datetime
+import json
 from pathlib import Path
 import numpy as np
 import xarray as xr
@@ -28,6 +29,10 @@ from parsim.solver import Solver, Statistic, coded_coordinate, flag_word, named_
 
 WALL_TIME = Statistic("wall_time", "s", "wall-clock time of the task on its rank", measured=True)
 """Measured by the runner for every task, whatever the solver."""
+
+VALUES_ATTRIBUTE = "parsim_values"
+"""The values of a swept string parameter as the job wrote them (a JSON list, in code order): its
+``flag_meanings`` are CF words (a file's path, say, with ``_`` for ``/``)."""
 
 MISSING_INTEGER = -1
 """An integer statistic's value for a task that has not finished, in a partial dataset (its _FillValue)."""
@@ -121,9 +126,17 @@ def decoded(dataset: xr.Dataset, names=None) -> xr.Dataset:
     of ``sel``)."""
     names = [name for name in dataset.dims if name in dataset.coords and "flag_meanings" in dataset[name].attrs] \
         if names is None else list(names)
-    return dataset.assign_coords({name: (dataset[name].dims, named_values(dataset[name]),
+    return dataset.assign_coords({name: (dataset[name].dims, _names(dataset[name]),
                                          {"long_name": dataset[name].attrs.get("long_name", name)})
                                   for name in names})
+
+
+def _names(coordinate) -> list:
+    """A flag-coded coordinate's values by name: as the job wrote them for a swept string."""
+    if VALUES_ATTRIBUTE not in coordinate.attrs:
+        return named_values(coordinate)
+    written = json.loads(coordinate.attrs[VALUES_ATTRIBUTE])
+    return [written[code] for code in np.atleast_1d(coordinate.values).tolist()]
 
 
 def _sweep_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
@@ -135,7 +148,9 @@ def _sweep_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
         values, attrs = np.asarray(values), _parameter_attributes(job, solver, name)
         if values.dtype.kind in "USO":
             coded = coded_coordinate(attrs["long_name"], tuple(flag_word(value) for value in values))
-            values, attrs = coded.values, {"units": coded.units, "long_name": coded.long_name, **coded.attrs}
+            attrs = {"units": coded.units, "long_name": coded.long_name, **coded.attrs,
+                     VALUES_ATTRIBUTE: json.dumps([str(value) for value in values])}
+            values = coded.values
         coords[name] = _coordinate(name, values, attrs)
     coords["realization"] = _coordinate("realization", np.arange(job.realizations),
                                         {"standard_name": "realization", "long_name": "realisation index",
