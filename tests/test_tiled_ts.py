@@ -7,6 +7,7 @@ round-off: forces and reductions are summed in an order that depends on the spli
 runs are not bitwise equal (they happen to be on one rank and without decomposition).
 """
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -104,3 +105,41 @@ def test_crowded_spheres_move_the_tile_blocks(ranks):
     done = run_mpi([str(REPOSITORY / "tests" / "scripts" / "rebalance_probe.py")], ranks=ranks)
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.startswith("OK"), done.stdout
+
+
+SAME_KERNELS = """
+import json, sys
+from mpi4py import MPI
+from numba.core import event
+from parsim.core.ts import simulate_ts
+from parsim.parallel.tiled import DecomposedDomain
+sys.path.insert(0, sys.argv[1])
+from tests.scripts.tiled_ts_probe import TIME_STEP_FACTOR, initial_condition
+
+simulate_ts(*initial_condition(100, 0.3), time_step_factor=TIME_STEP_FACTOR)  # the runner's serial warm-up
+compiled = []
+class Count(event.Listener):
+    def on_start(self, ev):
+        function = ev.data["dispatcher"].py_func
+        compiled.append(f"{function.__module__}.{function.__name__}")
+    def on_end(self, ev):
+        pass
+event.register("numba:compile", Count())
+x, v, r, m, L = initial_condition(400, 0.3)
+simulate_ts(x, v, r, m, L, time_step_factor=TIME_STEP_FACTOR, domain=DecomposedDomain(MPI.COMM_WORLD, L, 2))
+iterations = ("parsim.core.ts.daha._iterations", "parsim.core.ts.daha._check", "parsim.core.kernel_mpi.")
+counts = MPI.COMM_WORLD.gather(sorted(set(name for name in compiled if name.startswith(iterations))))
+if MPI.COMM_WORLD.Get_rank() == 0:
+    print(json.dumps(counts))
+"""
+
+
+def test_the_decomposed_minimiser_runs_the_kernels_the_serial_warm_up_compiled(tmp_path):
+    """The jitted iterations and their exchanges take the same argument types on one process and in
+    a decomposed run (requests in 8-byte slots whatever the MPI library's size), so the runner's
+    serial warm-up compiles them for the decomposed tasks too."""
+    environment_cache = str(tmp_path / "numba_cache")
+    done = run_mpi(["-c", f"import os; os.environ['NUMBA_CACHE_DIR'] = {environment_cache!r}\n" + SAME_KERNELS,
+                    str(REPOSITORY)], ranks=2)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == [[], []]

@@ -6,7 +6,8 @@ loop calls the MPI library itself: the functions are declared to numba by their 
 (:class:`numba.types.ExternalFunction`) and every handle (communicator, datatype, operation) is
 an argument, so the compiled kernels hold no address of this process and stay in numba's
 on-disk cache.  Handles are 64-bit integers (MPICH's are 32-bit ints, Open MPI's pointers:
-either fits); requests have the library's own size.
+either fits); requests, of the library's own size, lie back to back in 8-byte slots, so that a
+kernel is compiled once for one process and for a decomposed run.
 
 This module does not import mpi4py.  The names resolve to the MPI library that mpi4py mapped
 into the process (:func:`bind_library`, which the parallel layer calls once it has imported
@@ -16,7 +17,8 @@ stand-ins for that process.
 
 A *halo* tuple describes one rank's ghost exchange: communicator, size, the neighbours' ranks,
 which owned rows go to each (back to back, delimited by ``send_ptr``), how many ghost rows come
-from each (``recv_ptr``, stored from the first ghost row on), buffers, requests and statuses,
+from each (``recv_ptr``, stored from the first ghost row on), buffers, request slots (int64) and
+the bytes of one request, statuses,
 the handles of MPI_DOUBLE, MPI_MAX and MPI_SUM, and a tally of what was sent
 (:func:`parsim.parallel.halo.HaloPlan.kernel_halo` builds it).  :func:`no_halo` is the
 one-process halo: the kernels then make no MPI call at all.
@@ -100,7 +102,7 @@ def no_halo():
     """The halo of a problem held whole by one process: no neighbour, no reduction."""
     empty = np.zeros(0, dtype=np.int64)
     return (np.int64(0), np.int64(1), np.zeros(0, dtype=np.int32), empty, np.zeros(1, dtype=np.int64),
-            np.zeros(1, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(1, dtype=np.int64),
+            np.zeros(1, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(1, dtype=np.int64), np.int64(8),
             np.zeros(STATUS_INTS, dtype=np.int32), np.int64(0), np.int64(0), np.int64(0), np.zeros(N_TALLIES))
 
 
@@ -114,7 +116,7 @@ def _address(array, start):
 def share_rows(values, first_ghost, halo):
     """Overwrite the ghost rows of ``values`` (2-d, float64, from row ``first_ghost`` on) with
     their owners' rows: one message each way per neighbour.  Collective among neighbours."""
-    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _, _ = halo
+    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _, _, _ = halo
     if size == 1 or neighbours.shape[0] == 0:
         return
     width = values.shape[1]
@@ -130,7 +132,7 @@ def share_rows(values, first_ghost, halo):
 @jit
 def share_flags(flags, first_ghost, halo):
     """:func:`share_rows` for a flag per row."""
-    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _, _ = halo
+    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _, _, _ = halo
     if size == 1 or neighbours.shape[0] == 0:
         return
     for j in range(rows.shape[0]):
@@ -144,7 +146,9 @@ def share_flags(flags, first_ghost, halo):
 def _swap(halo, width):
     """Send each neighbour its part of the packed send buffer and receive its ghost rows (rows of
     ``width`` floats); returns when both are done."""
-    comm, _, neighbours, _, send_ptr, recv_ptr, send, receive, requests, statuses, double, _, _, tally = halo
+    comm, _, neighbours, _, send_ptr, recv_ptr, send, receive, slots, request_bytes, statuses, double, _, _, \
+        tally = halo
+    requests = slots.view(np.uint8)  # the library's requests back to back, whatever their size
     started = _wtime()
     n = 0
     failed = 0
@@ -152,12 +156,12 @@ def _swap(halo, width):
         first, last = recv_ptr[q] * width, recv_ptr[q + 1] * width
         if last > first:
             failed |= _irecv(_address(receive, first), last - first, double, neighbours[q], ROWS_TAG, comm,
-                             _address(requests, n))
+                             _address(requests, n * request_bytes))
             n += 1
         first, last = send_ptr[q] * width, send_ptr[q + 1] * width
         if last > first:
             failed |= _isend(_address(send, first), last - first, double, neighbours[q], ROWS_TAG, comm,
-                             _address(requests, n))
+                             _address(requests, n * request_bytes))
             n += 1
             tally[MESSAGES] += 1.0
             tally[BYTES] += 8.0 * (last - first)
@@ -189,7 +193,7 @@ def global_max_array(values, halo):
 @jit
 def _reduced(values, halo, add):
     """``values`` summed (``add``) or maximised element by element over the ranks of the halo."""
-    comm, size, _, _, _, _, _, _, _, _, double, maximum, total, tally = halo
+    comm, size, _, _, _, _, _, _, _, _, _, double, maximum, total, tally = halo
     if size == 1:
         return values
     started = _wtime()

@@ -88,11 +88,10 @@ class HaloPlan:
         send_counts = np.array([len(rows) for rows in self.send_indices], dtype=np.int64)
         rows = np.concatenate([np.asarray(r, dtype=np.int64) for r in self.send_indices] + [np.zeros(0, np.int64)])
         n_requests = max(2 * len(self.decomposition.neighbours), 1)
-        request_dtype = np.int32 if MPI._sizeof(MPI.Request) == 4 else np.int64
         return (_handle(comm), np.int64(comm.Get_size()), np.asarray(self.decomposition.neighbours, dtype=np.int32),
                 rows, _offsets(send_counts), _offsets(self.ghost_counts), np.zeros(len(rows) * width),
-                np.zeros(self.n_ghost * width), np.zeros(n_requests, dtype=request_dtype),
-                np.zeros(n_requests * kernel_mpi.STATUS_INTS, dtype=np.int32), _handle(MPI.DOUBLE), _handle(MPI.MAX),
+                np.zeros(self.n_ghost * width), np.zeros(n_requests, dtype=np.int64),
+                np.int64(MPI._sizeof(MPI.Request)), np.zeros(n_requests * kernel_mpi.STATUS_INTS, dtype=np.int32), _handle(MPI.DOUBLE), _handle(MPI.MAX),
                 _handle(MPI.SUM), np.zeros(kernel_mpi.N_TALLIES) if tally is None else tally)
 
     def _new_buffers(self, trailing: tuple, dtype) -> tuple[np.ndarray, np.ndarray]:
