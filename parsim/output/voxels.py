@@ -8,6 +8,7 @@ top of the highest sphere).  Periodic axes wrap: a sphere across the box's side 
 both sides.  Voxels outside a cylinder's circle are solid (not pore space).
 """
 
+import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from parsim.errors import JobError
+from parsim.output.atomic import write_bytes_atomically
 
 
 @dataclass(frozen=True)
@@ -77,21 +79,27 @@ def _mask_outside_cylinder(void, task, lower, spacing) -> None:
 def write_voxels(task, path, voxel_size: float | None = None, height: float | None = None) -> list:
     """``path`` (``LABEL_voxels.npy``, the boolean image numpy and porespy load), the same bytes as
     ``.raw`` (uint8, 1 void) with a ``.json`` header, and a ``.tif`` stack (z, y, x) if tifffile is
-    installed."""
+    installed; each written atomically, as every export is."""
     if voxel_size is None:
         raise JobError("format 'voxels' needs --voxel-size S: the voxels' edge, a length > 0 in the task's unit")
     image = voxelize(task, voxel_size, height)
     stem = str(path)[: -len(".npy")] if str(path).endswith(".npy") else str(path)
-    written = [f"{stem}.npy", f"{stem}.raw", f"{stem}.json"]
-    np.save(written[0], image.void)
-    image.void.astype(np.uint8).tofile(written[1])
-    with open(written[2], "w", encoding="utf-8") as header:
-        json.dump(image.header(), header, indent=1)
+    files = {Path(f"{stem}.npy"): _npy_bytes(image.void), Path(f"{stem}.raw"): image.void.astype(np.uint8).tobytes(),
+             Path(f"{stem}.json"): json.dumps(image.header(), indent=1).encode()}
     try:
         import tifffile
     except ImportError:
         tifffile = None
     if tifffile is not None:
-        written.append(f"{stem}.tif")
-        tifffile.imwrite(written[3], np.ascontiguousarray(np.transpose(image.void, (2, 1, 0)).astype(np.uint8)))
-    return [Path(name) for name in written]
+        stack = io.BytesIO()
+        tifffile.imwrite(stack, np.ascontiguousarray(np.transpose(image.void, (2, 1, 0)).astype(np.uint8)))
+        files[Path(f"{stem}.tif")] = stack.getvalue()
+    for target, data in files.items():
+        write_bytes_atomically(target, data)
+    return list(files)
+
+
+def _npy_bytes(array: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    return buffer.getvalue()
