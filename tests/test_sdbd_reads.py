@@ -63,3 +63,23 @@ def test_a_particle_settled_on_what_it_read_settles_the_same(make, n, lateral):
         for name in ("center_of_mass", "rotation", "contacts", "state", "event_counts", "steps"):
             assert np.array_equal(getattr(alone, name)[0], getattr(whole, name)[p]), (p, name)
     assert smaller >= 6  # the rectangles leave out part of the sediment: the test is not the whole run again
+
+
+def test_recording_the_rectangles_leaves_the_sediment_bitwise_the_same():
+    """The rectangles are written into the kernel's workspace at every step of every descent; a
+    mixture whose particles grow the grid's cell again and again (each growth allocates the grid's
+    arrays anew) must settle bit for bit as without them."""
+    offsets, radii = sphere()
+    n = 400
+    rng = np.random.default_rng(5)
+    scale = np.where(rng.random(n) < 0.5, 0.5, np.linspace(0.5, 1.0, n))  # every other one the largest yet
+    inputs = (offsets * RADIUS, radii * RADIUS, np.array([0, 1]), np.zeros(n, dtype=np.int64), scale,
+              random_rotations(n, rng), 1.0 + rng.random((n, 2)) * (BOX - 2.0), (0.0, 0.0), (BOX, BOX),
+              sdbd.LATERAL_PERIODIC, sdbd.FLOOR_ROLL)
+    assert len(np.unique(np.maximum.accumulate(scale))) >= 100  # the cell grows again and again
+    plain = sdbd.deposit(*inputs)
+    recorded, diagnostics = sdbd.deposit_with_diagnostics(*inputs, record_reads=True)
+    for name in ("positions", "center_of_mass", "rotation", "contacts", "state", "event_counts", "steps"):
+        assert np.array_equal(getattr(recorded, name), getattr(plain, name)), name
+    reads = diagnostics["reads"]
+    assert np.all(reads[:, 0] < reads[:, 1]) and np.all(reads[:, 2] < reads[:, 3])

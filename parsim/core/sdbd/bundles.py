@@ -210,7 +210,8 @@ def _scratch(floats, f):
 @jit
 def new_workspace(counters, reads):
     """Every bundle of :class:`Workspace`, allocated once per run in one block of numbers and one of
-    integers (zero-filled), with the run's ``counters`` and the particles' ``reads``."""
+    integers (zero-filled), with the run's ``counters`` and the particles' ``reads`` (which it keeps
+    alive)."""
     floats = np.zeros(_WORKSPACE_FLOATS)
     ints = np.zeros(_WORKSPACE_INTS, dtype=np.int64)
     contacts, i, f = _contact_list(ints, floats, 0, 0, MAX_CONTACTS)
@@ -220,8 +221,10 @@ def new_workspace(counters, reads):
     trial, i, f = _contact_geometry(ints, floats, i, f, 2)
     window, i, f = _event_window(ints, floats, i, f)
     scratch, f = _scratch(floats, f)
+    # the memory keeps the counters and the reads alive too: a caller's temporary would be freed at
+    # once, and the rectangles written into whatever took its place
     return Workspace(contacts, geometry, pivots, released, trial, window, scratch, borrowed(counters), borrowed(reads),
-                     (floats, ints))
+                     (floats, ints, counters, reads))
 
 
 @jit
