@@ -4,7 +4,7 @@ import numpy as np
 
 from parsim.core.jit import jit
 
-__all__ = ["with_rows"]
+__all__ = ["with_rows", "with_rows_filled"]
 
 
 @jit
@@ -19,4 +19,15 @@ def with_rows(array, rows, kept):
     new = grown.reshape(-1)
     for i in range(kept * width):
         new[i] = old[i]
+    return grown
+
+
+@jit
+def with_rows_filled(array, rows, kept, fill):
+    """:func:`with_rows` whose rows after the first ``kept`` hold ``fill``."""
+    grown = with_rows(array, rows, kept)
+    flat = grown.reshape(-1)
+    width = flat.size // rows if rows > 0 else 0
+    for i in range(kept * width, flat.size):
+        flat[i] = fill
     return grown

@@ -56,9 +56,24 @@ _FUNCTIONS = {
     "MPI_Allreduce": (ctypes.CFUNCTYPE(_int, _pointer, _pointer, _int, _handle, _handle, _handle),
                       types.int32(types.voidptr, types.voidptr, types.int32, types.int64, types.int64, types.int64)),
     "MPI_Wtime": (ctypes.CFUNCTYPE(ctypes.c_double), types.float64()),
+    "MPI_Iprobe": (ctypes.CFUNCTYPE(_int, _int, _int, _handle, _pointer, _pointer),
+                   types.int32(types.int32, types.int32, types.int64, types.voidptr, types.voidptr)),
+    "MPI_Get_count": (ctypes.CFUNCTYPE(_int, _pointer, _handle, _pointer),
+                      types.int32(types.voidptr, types.int64, types.voidptr)),
+    "MPI_Recv": (ctypes.CFUNCTYPE(_int, _pointer, _int, _handle, _int, _int, _handle, _pointer),
+                 types.int32(types.voidptr, types.int32, types.int64, types.int32, types.int32, types.int64,
+                             types.voidptr)),
+    "MPI_Test": (ctypes.CFUNCTYPE(_int, _pointer, _pointer, _pointer), types.int32(types.voidptr, types.voidptr,
+                                                                                 types.voidptr)),
+    "MPI_Iallreduce": (ctypes.CFUNCTYPE(_int, _pointer, _pointer, _int, _handle, _handle, _handle, _pointer),
+                       types.int32(types.voidptr, types.voidptr, types.int32, types.int64, types.int64, types.int64,
+                                   types.voidptr)),
 }
-_isend, _irecv, _waitall, _allreduce, _wtime = (types.ExternalFunction(name, signature)
-                                               for name, (_, signature) in _FUNCTIONS.items())
+_EXTERNAL = {name: types.ExternalFunction(name, signature) for name, (_, signature) in _FUNCTIONS.items()}
+_isend, _irecv, _waitall, _allreduce, _wtime = (_EXTERNAL[name] for name in (
+    "MPI_Isend", "MPI_Irecv", "MPI_Waitall", "MPI_Allreduce", "MPI_Wtime"))
+_iprobe, _get_count, _recv, _test, _iallreduce = (_EXTERNAL[name] for name in (
+    "MPI_Iprobe", "MPI_Get_count", "MPI_Recv", "MPI_Test", "MPI_Iallreduce"))
 
 
 def _stand_in(prototype):
@@ -209,3 +224,98 @@ def _reduced(values, halo, add):
     tally[REDUCTIONS] += 1.0
     tally[REDUCTION_SECONDS] += _wtime() - started
     return result
+
+
+# ---------------------------------------------------------------------------------------- messages
+# A *link* tuple lets a jitted loop send messages of any length to other ranks, find out whether one
+# has arrived and start a reduction, without waiting: communicator, size, the handles of MPI_DOUBLE
+# and MPI_MIN, request slots (int64, see above) and the bytes of one request, statuses, a flag, the
+# reduction's input and output, and a tally (LINK_* entries).  The parallel layer builds it
+# (:func:`parsim.parallel.deposition.kernel_link`).
+
+#: Entries of a link's tally: messages and bytes sent, seconds waiting for messages and reductions.
+LINK_MESSAGES, LINK_BYTES, LINK_WAIT_SECONDS = range(3)
+N_LINK_TALLIES = 3
+
+
+@jit
+def _checked(code):
+    if code != 0:
+        raise RuntimeError("an MPI call from a jitted kernel failed (is the MPI library bound? "
+                           "parsim.core.kernel_mpi.bind_library)")
+
+
+@jit
+def post_send(values, count, destination, tag, link, slot):
+    """Start sending ``values[:count]`` (float64) to rank ``destination``; its request takes slot
+    ``slot`` of the link, and lives until :func:`wait_slots` (``values`` must too)."""
+    comm, _, double, _, slots, request_bytes, _, _, _, tally = link
+    requests = slots.view(np.uint8)
+    _checked(_isend(values.ctypes, count, double, destination, tag, comm,
+                    _address(requests, slot * request_bytes)))
+    tally[LINK_MESSAGES] += 1.0
+    tally[LINK_BYTES] += 8.0 * count
+
+
+@jit
+def arrived_count(source, tag, link):
+    """The number of float64 in the next message from ``source`` with ``tag``, or -1 if none has
+    arrived yet."""
+    comm, _, double, _, _, _, statuses, flag, _, _ = link
+    flag[0] = 0
+    _checked(_iprobe(source, tag, comm, flag.ctypes, statuses.ctypes))
+    if flag[0] == 0:
+        return -1
+    _checked(_get_count(statuses.ctypes, double, flag.ctypes))
+    return np.int64(flag[0])
+
+
+@jit
+def receive_arrived(source, tag, count, link):
+    """The message that :func:`arrived_count` found (``count`` float64), as a new array."""
+    comm, _, double, _, _, _, statuses, _, _, _ = link
+    values = np.empty(max(count, 1))
+    _checked(_recv(values.ctypes, count, double, source, tag, comm, statuses.ctypes))
+    return values[:count]
+
+
+@jit
+def post_minimum(value, link, slot):
+    """Start the minimum of ``value`` over the link's ranks (slot ``slot``); read it with
+    :func:`reduced` once :func:`is_done`."""
+    comm, _, double, minimum, slots, request_bytes, _, _, reduction, _ = link
+    reduction[0] = value
+    requests = slots.view(np.uint8)
+    _checked(_iallreduce(reduction[0:].ctypes, reduction[1:].ctypes, 1, double, minimum, comm,
+                         _address(requests, slot * request_bytes)))
+
+
+@jit
+def reduced(link):
+    """The result of the last :func:`post_minimum`."""
+    return link[8][1]
+
+
+@jit
+def is_done(link, slot):
+    """Whether the request in slot ``slot`` has completed (it is then freed)."""
+    _, _, _, _, slots, request_bytes, statuses, flag, _, _ = link
+    requests = slots.view(np.uint8)
+    flag[0] = 0
+    _checked(_test(_address(requests, slot * request_bytes), flag.ctypes, statuses.ctypes))
+    return flag[0] != 0
+
+
+@jit
+def wait_slots(link, first, count):
+    """Wait for the requests in slots ``first .. first + count - 1``."""
+    _, _, _, _, slots, request_bytes, statuses, _, _, _ = link
+    if count > 0:
+        requests = slots.view(np.uint8)
+        _checked(_waitall(count, _address(requests, first * request_bytes), statuses.ctypes))
+
+
+@jit
+def now():
+    """MPI_Wtime: seconds from an arbitrary origin."""
+    return _wtime()

@@ -42,12 +42,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from parsim.core import sdbd
-from parsim.core.sdbd import blocks, grid as grid_module
-from parsim.core.sdbd.blocks import FAIL_CONFLICT, FAIL_REGION, FINAL, N_FAILURES, STOPPED
+from parsim.core import kernel_mpi, sdbd
+from parsim.core.sdbd import blocks, grid as grid_module, rounds
+from parsim.core.sdbd.blocks import FINAL, STOPPED
 from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, N_EVENT_KINDS
 from parsim.errors import JobError
 from parsim.parallel.collective import abort_if_alone
+from parsim.parallel.halo import kernel_link
 
 __all__ = ["BlockLayout", "CellGrowth", "deposit_decomposed", "deposit_streamed", "DecomposedDeposition",
            "DecompositionError", "InvalidDeposition", "default_halo", "drop_order", "spans"]
@@ -57,8 +58,6 @@ __all__ = ["BlockLayout", "CellGrowth", "deposit_decomposed", "deposit_streamed"
 WINDOW_PER_RANK = 512
 REFERENCE_COLUMNS = 45_000  # a block of 150 x 300 sphere diameters
 SMALLEST_WINDOW = 64
-#: rows settled between two tests of whether every rank has settled its window
-AHEAD_ROWS = 8
 
 
 class InvalidDeposition(JobError, ValueError):
@@ -153,6 +152,13 @@ class BlockLayout:
             x = self.low + np.mod(np.asarray(x) - self.low, self.length)
         inner = self.edges[1:-1]
         return np.searchsorted(inner, x, side="right").astype(np.int64)
+
+    def neighbours(self, k) -> list:
+        """The other blocks whose regions meet block ``k``'s: where its particles' footprints and committed
+        spheres can matter."""
+        mine = self.region(k)
+        return [q for q in range(self.n_blocks) if q != k and blocks.interval_meets(
+            mine[0], mine[1], *self.region(q), self.length, self.periodic)]
 
     def region(self, k) -> np.ndarray:
         """``[x_low, x_high]`` of block ``k`` widened by the halo."""
@@ -360,7 +366,7 @@ class _Keeping:
     def own(self, prep, n_spheres) -> "_OwnParticles":
         """The rank's particles, their inputs in ``prep`` (of the whole run's ``n_spheres``)."""
         columns = ([np.concatenate([part[k] for part in self.inputs]) for k in range(4)] if self.inputs
-                   else list(prep.kernel_inputs()[3:]))
+                   else [array[:0] for array in prep.kernel_inputs()[3:]])
         own_prep = prep._replace(particle_shape=columns[0], particle_scale=columns[1], particle_rotation=columns[2],
                                  particle_drop_xy=columns[3], n_spheres=n_spheres)
         return _OwnParticles(own_prep, np.concatenate(self.index + [np.zeros(0, dtype=np.int64)]),
@@ -378,7 +384,9 @@ class _OwnParticles:
 
 
 class _RankRun:
-    """The rounds of :func:`deposit_decomposed` on one rank (see the module docs)."""
+    """One rank's part of :func:`deposit_decomposed` (see the module docs): the rounds run in a jitted loop
+    (:func:`parsim.core.sdbd.rounds.run_rounds`), which hands back to Python only a particle whose
+    rectangle left its owner's region, to be settled on what its owner fetches from every rank."""
 
     def __init__(self, comm, own, survey, layout, window, check, clock_from):
         self.comm = comm
@@ -386,263 +394,146 @@ class _RankRun:
         self.prep = prep = own.prep
         self.n_particles = survey.n_particles
         self.layout = layout
-        self.window = window
         self.periodic = layout.periodic
         self.length = (prep.box_upper_xy - prep.box_lower_xy).astype(float)
-        n_sub = len(prep.substrate_radii)
-        self.index = own.index
-        self.count = np.diff(prep.shape_start)[prep.particle_shape]
-        self.first_key = own.first_key
-        self.sphere_row = np.cumsum(self.count) - self.count
-        n = len(self.index)
-        self.slot = np.full(n, -1, dtype=np.int64)
-        self.status = np.zeros(n, dtype=np.int8)
-        self.footprint = np.zeros((n, 4))
-        self.rectangle = np.zeros((n, 4))
-        self.com = np.zeros((n, 3))
-        self.rot = np.zeros((n, 4))
-        self.contacts = np.zeros(n, dtype=np.int8)
-        self.state = np.zeros(n, dtype=np.int8)
-        self.events = np.zeros((n, N_EVENT_KINDS), dtype=np.int32)
-        self.steps = np.zeros(n, dtype=np.int32)
-        self.chunks = np.zeros(n, dtype=np.int64)
-        self.signatures = np.zeros((n if check else 0, 2), dtype=np.int64)
-        self.spheres = np.zeros((int(self.count.sum()), 3))
+        self.owns_block = self.rank < layout.n_blocks
+        n = len(own.index)
+        count = np.diff(prep.shape_start)[prep.particle_shape]
+        sphere_row = np.cumsum(count) - count
         self.n_max = int(np.max(np.diff(prep.shape_start)))
-        self.cells = survey.cells
-        self.growth = self.cells.growth()
+        self._lay_substrate(int(count.sum()))
+        self.rows = blocks.Rows(
+            index=own.index, count=count, first_key=own.first_key, sphere_row=sphere_row,
+            slot=self.n_used + sphere_row, status=np.zeros(n, dtype=np.int8), footprint=np.zeros((n, 4)),
+            rectangle=np.zeros((n, 4)), com=np.zeros((n, 3)), rotation=np.zeros((n, 4)),
+            contacts=np.zeros(n, dtype=np.int8), state=np.zeros(n, dtype=np.int8),
+            events=np.zeros((n, N_EVENT_KINDS), dtype=np.int32), steps=np.zeros(n, dtype=np.int32),
+            chunks=np.zeros(n, dtype=np.int64), spheres=np.zeros((int(count.sum()), 3)),
+            signatures=np.zeros((n if check else 0, 2), dtype=np.int64))
+        self.n_used += int(count.sum())  # every own particle's spheres have their slots from the start
+        region = layout.region(self.rank) if self.owns_block else np.array([1.0, 0.0])
+        neighbours = layout.neighbours(self.rank) if self.owns_block else []
+        cells = survey.cells
+        self.plan = rounds.Plan(
+            n_particles=self.n_particles, window=int(window), growth_at=np.array(cells.at, dtype=np.int64),
+            cell=np.array(cells.cell), side=np.array([_column_side(prep, cell) for cell in cells.cell]), region=region,
+            neighbours=np.array(neighbours, dtype=np.int64),
+            neighbour_regions=np.array([layout.region(q) for q in neighbours]).reshape(-1, 2), length=self.length,
+            periodic=self.periodic, clock_from=int(clock_from), n_max=self.n_max)
+        self.link = kernel_link(comm, 1 + len(neighbours))
         self.settled_end = 0
+        self.margin = float(self.plan.side[0])
+        self.settles = np.zeros(1, dtype=np.int64)
+        self.counts = np.zeros(rounds.N_TALLIES)
+        self.fetches = 0
         self.fetched = set()
-        self.column_sides = {}
-        self.clock_from = clock_from
-        self.tally = {"rounds": 0, "settles": np.zeros(1, dtype=np.int64), "conflicts": 0, "fetches": 0,
-                      "halo_particles": 0, "halo_bytes": 0, "footprint_bytes": 0, "settle_seconds": 0.0}
-        self._lay_substrate(n_sub)
+        self.clock = np.full(1, np.nan)
 
-    # ------------------------------------------------------------------ local sediment
-    def _lay_substrate(self, n_sub):
+    def _lay_substrate(self, own_spheres):
         prep = self.prep
-        capacity = n_sub + int(self.count.sum()) + 1024
+        capacity = len(prep.substrate_radii) + own_spheres + 1024
         self.centre = np.zeros((capacity, 3))
         self.radius = np.zeros(capacity)
         self.key = np.full(capacity, -1, dtype=np.int64)
         grid_state = grid_module.grid_new(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.first_cell,
                                           capacity, prep.polygon, prep.n_sides)
-        region = self.layout.region(self.rank) if self.rank < self.layout.n_blocks else np.array([1.0, 0.0])
+        region = self.layout.region(self.rank) if self.owns_block else np.array([1.0, 0.0])
         self.n_used, self.grid = blocks.lay_substrate(prep.substrate_positions, prep.substrate_radii, region,
                                                       self.centre, self.radius, self.key, grid_state)
         self.n_substrate = self.n_used
 
-    def _reserve(self, n_spheres):
-        """Room for ``n_spheres`` more spheres; returns the first free slot."""
-        need = self.n_used + n_spheres
-        if need > len(self.radius):
-            capacity = max(need, 2 * len(self.radius))
-            self.centre = _grown(self.centre, capacity, 0.0)
-            self.radius = _grown(self.radius, capacity, 0.0)
-            self.key = _grown(self.key, capacity, -1)
-            grid_state = list(self.grid)
-            grid_state[4] = _grown(grid_state[4], capacity, -1)
-            self.grid = tuple(grid_state)
-        first = self.n_used
-        self.n_used = need
-        return first
-
-    def _give_slots(self, first_row, last_row):
-        """Slots for the rows that have none yet, one after the other."""
-        rows = first_row + np.flatnonzero(self.slot[first_row:last_row] < 0)
-        if len(rows):
-            counts = self.count[rows]
-            self.slot[rows] = self._reserve(int(counts.sum())) + np.cumsum(counts) - counts
-
-    def _set_cell(self, cell):
-        if self.grid[0][6] != cell:
-            self.grid = blocks.grid_with_cell(self.grid, cell, self.centre, self.radius, self.key)
-
-    def _settle(self, first_row, last_row):
-        prep = self.prep
-        self._give_slots(first_row, last_row)
-        given_top = np.nan
-        if last_row == first_row + 1:
-            cell = self.cells.after(int(self.index[first_row]))
-            if cell > self.grid[0][6]:  # the serial run drops it, then grows the grid
-                given_top = blocks.drop_top(first_row, *prep.kernel_inputs(), self.grid, self.centre, self.radius,
-                                            prep.length_scale, self.n_max)
-                self._set_cell(cell)
-        self.grid = blocks.settle_rows(
-            first_row, last_row, self.settled_end, *prep.kernel_inputs(), self.grid, self.centre,
-            self.radius, self.key, *prep.kernel_settings(), self.status, self.footprint, self.rectangle,
-            self.slot, self.count, self.first_key, self.com, self.rot, self.contacts, self.state, self.events,
-            self.steps, self.chunks, self.spheres, self.sphere_row, self.margin, self.n_max, self.tally["settles"],
-            self.signatures, given_top)
-        self.settled_end = max(self.settled_end, last_row)
-
-    def _withdraw(self, row):
-        blocks.withdraw(row, self.status, self.slot, self.count, self.centre, self.radius, self.grid)
-
-    def _insert(self, parcel, first_row):
-        """Committed particles of other ranks (a :func:`_parcel`) join the local sediment."""
-        counts, footprints, keys, centres, radii = parcel
-        first = self._reserve(len(radii))
-        self.grid = blocks.insert_committed(len(counts), counts, footprints, keys, centres, radii, first,
-                                            self.centre, self.radius, self.key, self.grid, first_row,
-                                            self.settled_end, self.status, self.footprint, self.rectangle,
-                                            self.slot, self.count, self.margin)
-
-    def _parcel(self, rows):
-        """The spheres of ``rows`` as sent to another rank: counts, footprints, keys, wrapped centres, radii."""
-        counts = self.count[rows]
-        slots = spans(self.slot[rows], counts)
-        return counts, self.footprint[rows], self.key[slots], self.centre[slots], self.radius[slots]
-
     # ------------------------------------------------------------------ rounds
     def run(self) -> DecomposedDeposition:
-        n_particles = self.n_particles
+        from mpi4py import MPI
         frontier = 0
         stopped_at = -1
-        clock_start = None
-        while frontier < n_particles and stopped_at < 0:
-            self.tally["rounds"] += 1
-            self._set_cell(self._cell_before(frontier))
-            end = self._window_end(frontier, n_particles)
-            self.margin = self._column_side(self.cells.after(end - 1))
-            first_row, last_row = np.searchsorted(self.index, [frontier, end])
-            started = time.perf_counter()
-            self._settle(first_row, last_row)
-            self._settle_while_waiting(last_row, self._ahead_end(frontier, end, n_particles))
-            self.tally["settle_seconds"] += time.perf_counter() - started
-            others = self._share_footprints(first_row, last_row)
-            failure = self._first_failure(first_row, last_row, others, end)
-            new_frontier, reason = divmod(failure, N_FAILURES)
-            committed_end = np.searchsorted(self.index, min(new_frontier, end))
-            self._commit(first_row, committed_end)
-            if new_frontier >= end:
-                new_frontier = end
-            elif reason == FAIL_CONFLICT:
-                self.tally["conflicts"] += 1
-                if self._owns(new_frontier):
-                    self._withdraw(self._row(new_frontier))
-            elif reason == FAIL_REGION:
-                self.tally["fetches"] += 1
-                if self._fetch_and_settle(new_frontier):
-                    stopped_at = new_frontier
+        while frontier < self.n_particles and stopped_at < 0:
+            outcome, particle = self._rounds(frontier)
+            if outcome == rounds.DONE:
+                frontier = particle
+            elif outcome == rounds.LEFT_REGION:
+                self.fetches += 1
+                started = MPI.Wtime()
+                if self._fetch_and_settle(particle):
+                    stopped_at = particle
                 else:
-                    new_frontier += 1
-                    self._commit(committed_end, np.searchsorted(self.index, new_frontier))
-            else:  # FAIL_STOPPED: the serial run stops at this particle too
-                stopped_at = new_frontier
-            if clock_start is None and 0 <= self.clock_from < new_frontier:
-                clock_start = started
-            frontier = new_frontier
-        clocked = time.perf_counter() - clock_start if clock_start is not None else float("nan")
+                    frontier = particle + 1
+                    self._commit(*np.searchsorted(self.rows.index, [particle, frontier]))
+                    if np.isnan(self.clock[0]) and 0 <= self.plan.clock_from < frontier:
+                        self.clock[0] = started
+            elif outcome == rounds.STOPPED_AT_LIMIT:  # the serial run stops at this particle too
+                stopped_at = particle
+            else:
+                raise DecompositionError(
+                    f"particle {particle} was committed, but the sediment it read changed after it was settled: "
+                    f"the decomposed sediment would not be the serial one")
+        clocked = MPI.Wtime() - self.clock[0] if not np.isnan(self.clock[0]) else float("nan")
         return self._share(stopped_at, clocked)
 
-    def _cell_before(self, particle):
-        """The grid's cell when ``particle`` is dropped."""
-        return self.prep.first_cell if particle == 0 else self.cells.after(particle - 1)
-
-    def _column_side(self, cell):
-        if cell not in self.column_sides:
-            self.column_sides[cell] = _column_side(self.prep, cell)
-        return self.column_sides[cell]
-
-    def _settle_while_waiting(self, first_row, end_row):
-        """Until every rank has settled its window, settle the rows after it (up to ``end_row``), a few
-        at a time: the next windows' work, done while a faster rank would otherwise wait."""
-        done = self.comm.Ibarrier()
-        row = max(first_row, self.settled_end)
-        while not done.Test():
-            if row >= end_row:
-                done.Wait()
-                break
-            self._settle(row, min(row + AHEAD_ROWS, end_row))
-            row = self.settled_end
-
-    def _ahead_end(self, frontier, end, n_particles):
-        """The row after the last one that may be settled ahead of the window: one window further, and
-        never past a growth of the grid's cell."""
-        if end == frontier + 1 and _holds(self.growth, frontier):
-            return np.searchsorted(self.index, end)
-        return int(np.searchsorted(self.index, min(end + self.window, self._next_growth(frontier, n_particles))))
-
-    def _window_end(self, frontier, n_particles):
-        """A window never spans a growth of the grid's cell: a particle larger than all before is
-        settled alone, and the ranks rebuild their grids after it."""
-        if _holds(self.growth, frontier):
-            return frontier + 1
-        return min(frontier + self.window, self._next_growth(frontier, n_particles))
-
-    def _next_growth(self, particle, n_particles):
-        """The first particle after ``particle`` that grows the grid's cell (``n_particles`` if none)."""
-        at = np.searchsorted(self.growth, particle, side="right")
-        return int(self.growth[at]) if at < len(self.growth) else n_particles
+    def _rounds(self, frontier):
+        """Rounds in the jitted loop from ``frontier`` until it needs Python; returns its outcome and
+        particle."""
+        prep = self.prep
+        (outcome, particle, self.grid, self.centre, self.radius, self.key, self.n_used, self.settled_end,
+         self.margin) = rounds.run_rounds(frontier, prep.kernel_inputs(), prep.kernel_settings(), self.rows, self.plan,
+                                          self.grid, self.centre, self.radius, self.key, self.n_used,
+                                          self.settled_end, self.link, self.counts, self.settles, self.clock)
+        return int(outcome), int(particle)
 
     def _owns(self, particle):
-        return _holds(self.index, particle)
+        return _holds(self.rows.index, particle)
 
     def _row(self, particle):
-        return int(np.searchsorted(self.index, particle))
+        return int(np.searchsorted(self.rows.index, particle))
 
     def _destinations(self):
         return [q for q in range(self.layout.n_blocks) if q != self.rank]
 
-    def _share_footprints(self, first_row, last_row):
-        """Every rank's window footprints that meet this rank's region, sorted by particle."""
-        outgoing = [None] * self.comm.Get_size()
-        boxes = self.footprint[first_row:last_row]
-        for q in self._destinations():
-            region = self.layout.region(q)
-            met = blocks.rows_meeting(boxes, region[0], region[1], self.length[0], self.periodic)
-            outgoing[q] = (self.index[first_row:last_row][met], boxes[met])
-            self.tally["footprint_bytes"] += outgoing[q][0].nbytes + outgoing[q][1].nbytes
-        incoming = [part for part in self.comm.alltoall(outgoing) if part is not None]
-        index = np.concatenate([p[0] for p in incoming] + [np.zeros(0, dtype=np.int64)])
-        footprints = np.concatenate([p[1] for p in incoming] + [np.zeros((0, 4))])
-        order = np.argsort(index, kind="stable")
-        return index[order], footprints[order]
-
-    def _first_failure(self, first_row, last_row, others, end):
-        from mpi4py import MPI
-        none = end * N_FAILURES
-        mine = none
-        if self.rank < self.layout.n_blocks:
-            code = blocks.first_failure(first_row, last_row, self.index, self.status, self.rectangle,
-                                        self.layout.region(self.rank), others[0], others[1], len(others[0]),
-                                        self.margin, self.length[0], self.length[1], self.periodic)
-            if code >= 0:
-                mine = code
-        return int(self.comm.allreduce(mine, op=MPI.MIN))
-
     def _commit(self, first_row, last_row):
-        """Rows ``first_row .. last_row - 1`` are committed: final, and sent to the ranks whose region
-        holds one of their sphere centres.  Collective."""
-        self.status[first_row:last_row] = FINAL
+        """Rows ``first_row .. last_row - 1`` are committed: final, and sent to every rank whose region
+        holds one of their sphere centres (a fetched particle may lie beyond the neighbours' regions).
+        Collective."""
+        rows = self.rows
+        rows.status[first_row:last_row] = FINAL
         self._share_committed(first_row, last_row)
-        if len(self.signatures):
-            changed = blocks.first_changed(first_row, last_row, self.signatures, self.rectangle, self.margin,
-                                           self.first_key, self.status, self.grid, self.centre, self.key)
+        if len(rows.signatures):
+            changed = blocks.first_changed(first_row, last_row, rows.signatures, rows.rectangle, self.margin,
+                                           rows.first_key, rows.status, self.grid, self.centre, self.key)
             if changed >= 0:
                 raise DecompositionError(
-                    f"particle {self.index[changed]} was committed, but the sediment it read changed after it "
+                    f"particle {rows.index[changed]} was committed, but the sediment it read changed after it "
                     f"was settled: the decomposed sediment would not be the serial one")
 
     def _share_committed(self, first_row, last_row):
         """Send the newly committed rows to the ranks whose region holds one of their sphere centres;
         insert what the others send."""
-        rows = np.arange(first_row, last_row)
+        committed = np.arange(first_row, last_row)
         outgoing = [None] * self.comm.Get_size()
         for q in self._destinations():
             region = self.layout.region(q)
             box = np.array([region[0], region[1], np.inf, -np.inf])
-            inside = blocks.rows_with_centre_in(rows, self.slot, self.count, self.centre, box, self.length[0],
-                                                self.length[1], self.periodic)
+            inside = blocks.rows_with_centre_in(committed, self.rows.slot, self.rows.count, self.centre, box,
+                                                self.length[0], self.length[1], self.periodic)
             if np.any(inside):
-                outgoing[q] = self._parcel(rows[inside])
-                self.tally["halo_particles"] += int(np.count_nonzero(inside))
-                self.tally["halo_bytes"] += sum(a.nbytes for a in outgoing[q])
+                outgoing[q] = self._parcel(committed[inside])
+                self.counts[rounds.HALO_PARTICLES] += int(np.count_nonzero(inside))
+                self.counts[rounds.HALO_BYTES] += sum(a.nbytes for a in outgoing[q])
         for parcel in self.comm.alltoall(outgoing):
             if parcel is not None:
                 self._insert(parcel, last_row)
+
+    def _insert(self, parcel, first_row):
+        """Committed particles of other ranks (a :func:`_parcel`) join the local sediment; the present rows
+        from ``first_row`` on that they touch are withdrawn."""
+        self.grid, self.centre, self.radius, self.key, self.n_used = rounds.insert_parcel(
+            *parcel, first_row, self.rows, self.grid, self.centre, self.radius, self.key, self.n_used,
+            self.settled_end, self.margin, self.n_max)
+
+    def _parcel(self, rows):
+        """The spheres of ``rows`` as sent to another rank: counts, footprints, keys, wrapped centres, radii."""
+        counts = self.rows.count[rows]
+        slots = spans(self.rows.slot[rows], counts)
+        return counts, self.rows.footprint[rows], self.key[slots], self.centre[slots], self.radius[slots]
 
     def _fetch_and_settle(self, particle):
         """Settle ``particle``, at the frontier, on the committed spheres its owner fetches from every
@@ -661,29 +552,31 @@ class _RankRun:
                 for source, parcel in enumerate(parts):
                     if source != owner:  # the owner's own particles are in its sediment
                         self._insert(self._not_fetched(parcel), row)
-                self._set_cell(self._cell_before(particle))
-                self._withdraw(row)
-                self._settle(row, row + 1)
+                prep = self.prep
+                self.grid, self.settled_end = rounds.settle_again(
+                    row, prep.kernel_inputs(), prep.kernel_settings(), self.rows, self.plan, self.grid, self.centre,
+                    self.radius, self.key, self.n_used, self.settled_end, self.margin, self.settles)
                 box = self._widened(row, self.margin)
                 done = (blocks.interval_within(box[0], box[1], region[0], region[1], self.length[0], self.periodic)
                         or _box_within(box, extent, self.length, self.periodic))
-                message = (done, _hull(extent, self._widened(row, reach)), self.status[row] == STOPPED)
+                message = (done, _hull(extent, self._widened(row, reach)), self.rows.status[row] == STOPPED)
             done, extent, stopped = self.comm.bcast(message, root=owner)
             if done:
                 return stopped
 
     def _widened(self, row, by):
-        box = self.rectangle[row]
+        box = self.rows.rectangle[row]
         return np.array([box[0] - by, box[1] + by, box[2] - by, box[3] + by])
 
     def _committed_in(self, extent, region, particle):
         """This rank's committed particles (and substrate spheres in its block) with a sphere centre in
         ``extent`` and none in the owner's ``region`` (which holds those already)."""
-        final = np.flatnonzero(self.status == FINAL)
+        rows = self.rows
+        final = np.flatnonzero(rows.status == FINAL)
         x_only = np.array([region[0], region[1], np.inf, -np.inf])
-        inside = blocks.rows_with_centre_in(final, self.slot, self.count, self.centre, extent, self.length[0],
+        inside = blocks.rows_with_centre_in(final, rows.slot, rows.count, self.centre, extent, self.length[0],
                                             self.length[1], self.periodic)
-        held = blocks.rows_with_centre_in(final, self.slot, self.count, self.centre, x_only, self.length[0],
+        held = blocks.rows_with_centre_in(final, rows.slot, rows.count, self.centre, x_only, self.length[0],
                                           self.length[1], self.periodic)
         counts, footprints, keys, centres, radii = self._parcel(final[inside & ~held])
         substrate = np.arange(self.n_substrate)
@@ -710,16 +603,29 @@ class _RankRun:
         return counts[new], footprints[new], keys[spheres], centres[spheres], radii[spheres]
 
     def _share(self, stopped_at, clocked_seconds) -> DecomposedDeposition:
+        rows = self.rows
         done = self.n_particles if stopped_at < 0 else stopped_at
-        rows = np.flatnonzero((self.status == FINAL) & (self.index < done))
-        spheres = spans(self.sphere_row[rows], self.count[rows])
-        slots = spans(self.slot[rows], self.count[rows])
-        tally = dict(self.tally, settles=int(self.tally["settles"][0]), particles=len(rows),
-                     chunk_steps=int(self.chunks[rows].sum()))
-        return DecomposedDeposition(self.index[rows], self.prep.particle_shape[rows], self.prep.particle_scale[rows],
-                                    self.com[rows], self.rot[rows], self.contacts[rows], self.state[rows],
-                                    self.events[rows], self.steps[rows], self.count[rows], self.spheres[spheres],
-                                    self.radius[slots], stopped_at, clocked_seconds, tally)
+        final = (rows.status == FINAL) & (rows.index < done)
+        if final.all():  # the usual end: every row, already in order
+            kept, spheres = slice(0, len(final)), slice(None)
+            slots = slice(self.n_substrate, self.n_substrate + len(rows.spheres))
+        else:
+            kept = np.flatnonzero(final)
+            spheres = spans(rows.sphere_row[kept], rows.count[kept])
+            slots = spans(rows.slot[kept], rows.count[kept])
+        counts = self.counts
+        link = self.link[-1]
+        tally = {"rounds": int(counts[rounds.ROUNDS]), "settles": int(self.settles[0]),
+                 "conflicts": int(counts[rounds.CONFLICTS]), "fetches": self.fetches,
+                 "halo_particles": int(counts[rounds.HALO_PARTICLES]), "halo_bytes": int(counts[rounds.HALO_BYTES]),
+                 "footprint_bytes": int(counts[rounds.FOOTPRINT_BYTES]),
+                 "settle_seconds": float(counts[rounds.SETTLE_SECONDS]),
+                 "messages": int(link[kernel_mpi.LINK_MESSAGES]), "particles": int(np.count_nonzero(final)),
+                 "chunk_steps": int(rows.chunks[kept].sum())}
+        return DecomposedDeposition(rows.index[kept], self.prep.particle_shape[kept], self.prep.particle_scale[kept],
+                                    rows.com[kept], rows.rotation[kept], rows.contacts[kept], rows.state[kept],
+                                    rows.events[kept], rows.steps[kept], rows.count[kept], rows.spheres[spheres],
+                                    self.radius[slots].copy(), stopped_at, clocked_seconds, tally)
 
 
 def _holds(ascending, value) -> bool:
@@ -750,12 +656,6 @@ def spans(starts, counts):
     counts = np.asarray(counts, dtype=np.int64)
     return np.repeat(np.asarray(starts, dtype=np.int64) - (np.cumsum(counts) - counts), counts) \
         + np.arange(int(counts.sum()), dtype=np.int64)
-
-
-def _grown(array, rows, fill):
-    grown = np.full((rows,) + array.shape[1:], fill, dtype=array.dtype)
-    grown[:len(array)] = array
-    return grown
 
 
 def _column_side(prep, cell) -> float:

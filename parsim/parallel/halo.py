@@ -152,6 +152,16 @@ def _checked_width(decomposition: Decomposition, width) -> float:
     return width
 
 
+def kernel_link(comm, n_requests: int) -> tuple:
+    """A link of :mod:`parsim.core.kernel_mpi` over ``comm``, for messages and reductions from jitted loops
+    with up to ``n_requests`` requests at a time."""
+    n_requests = max(int(n_requests), 1)
+    return (_handle(comm), np.int64(comm.Get_size()), _handle(MPI.DOUBLE), _handle(MPI.MIN),
+            np.zeros(n_requests, dtype=np.int64), np.int64(MPI._sizeof(MPI.Request)),
+            np.zeros(n_requests * kernel_mpi.STATUS_INTS, dtype=np.int32), np.zeros(1, dtype=np.int32), np.zeros(2),
+            np.zeros(kernel_mpi.N_LINK_TALLIES))
+
+
 def _handle(mpi_object) -> np.int64:
     """The library's handle of ``mpi_object`` as a signed 64-bit integer (mpi4py gives it unsigned)."""
     value = MPI._handleof(mpi_object)

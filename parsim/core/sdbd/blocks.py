@@ -33,6 +33,7 @@ to check the invariant in the tests.
 """
 
 import math
+from collections import namedtuple
 
 import numpy as np
 
@@ -47,8 +48,8 @@ from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.rotation import matrix_to_quat
 from parsim.core.sdbd.strips import mark_strips, meets_strips
 
-__all__ = ["ABSENT", "PRESENT", "STOPPED", "FINAL", "WITHDRAWN", "settle_rows", "first_failure", "insert_committed",
-           "withdraw", "grid_with_cell", "lay_substrate", "read_signature", "first_changed", "drop_top",
+__all__ = ["ABSENT", "PRESENT", "STOPPED", "FINAL", "WITHDRAWN", "Rows", "new_scratch", "settle_rows", "first_failure", "insert_committed",
+           "withdraw", "lay_substrate", "read_signature", "first_changed", "drop_top",
            "rows_meeting", "rows_with_centre_in", "box_meets", "interval_within"]
 
 ABSENT, PRESENT, STOPPED, FINAL, WITHDRAWN = 0, 1, 2, 3, 4
@@ -132,16 +133,6 @@ def _withdraw_met(first, last, box, by_footprint, status, footprint, rectangle, 
 
 
 @jit
-def grid_with_cell(grid_state, cell, centre, radius, key):
-    """The grid's arrays, rebuilt with cell ``cell`` over the slots in the sediment (radius > 0),
-    inserted in increasing key: every list as the serial run's."""
-    grid = new_grid(*grid_state)
-    used = np.flatnonzero(radius > 0.0)
-    regrid(grid, cell, centre, used[np.argsort(key[used], kind="mergesort")])
-    return grid.memory  # the arrays themselves: borrowed views never go back to Python
-
-
-@jit
 def insert_committed(n_particles, particle_count, particle_footprint, sphere_key, sphere_centre, sphere_radius,
                      first_slot, centre, radius, key, grid_state, first_row, last_row, status, footprint,
                      rectangle, slot, count, margin):
@@ -176,30 +167,48 @@ def insert_committed(n_particles, particle_count, particle_footprint, sphere_key
     return geom, igeom, head, col_top, nxt, hkeys, hval, counts
 
 
+#: One rank's rows (its particles in drop order) and what settling them gave: their places in the drop
+#: order (``index``), numbers of spheres (``count``), first sphere keys, first rows in ``spheres``
+#: (``sphere_row``) and slots in the local sediment; their ``status`` (ABSENT ... WITHDRAWN),
+#: ``footprint`` and read ``rectangle`` (x_low, x_high, y_low, y_high); their centres of mass,
+#: quaternions, contacts, states, event counts, steps and chunk ends; their spheres as the particles
+#: hold them (``spheres``), and the :func:`read_signature` of each (``signatures``: no rows, none taken).
+Rows = namedtuple("Rows", ["index", "count", "first_key", "sphere_row", "slot", "status", "footprint", "rectangle",
+                           "com", "rotation", "contacts", "state", "events", "steps", "chunks", "spheres",
+                           "signatures"])
+
+
 @jit
-def settle_rows(first, last, settled_end, shape_offsets, shape_radii, shape_start, particle_shape,
-                particle_scale, particle_rotation, particle_drop_xy, grid_state, centre, radius, key, floor_mode,
-                wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell, status, footprint, rectangle, slot,
-                count, first_key, out_com, out_rot, out_contacts, out_state, out_events, out_steps, out_chunks,
-                out_sphere, sphere_row, margin, n_max, settles, signatures, given_top):
+def new_scratch(n_max):
+    """What settling particles of up to ``n_max`` spheres works in (:func:`settle_rows`), allocated
+    once per kernel call: the particle, the workspace, the descent's history and a trace row."""
+    return (new_particle(n_max), new_workspace(np.empty(0, dtype=np.int64), np.empty(read_box.N_READS)),
+            new_descent_history(), np.empty((1, 16)))
+
+
+@jit
+def settle_rows(scratch, buf, first, last, settled_end, particles, settings, rows, grid, centre, radius, key, margin,
+                settles, given_top):
     """Settle the absent rows among ``first .. last - 1`` in drop order (row ``o``'s inputs are entry
-    ``o`` of the particle arrays), keeping the invariant of the module docs; rows from ``settled_end`` on were
-    never settled.  Each writes its results into the ``out_*`` rows (``out_sphere`` from row
-    ``sphere_row[o]`` on: its spheres as the particle holds them, a periodic box's beyond it
-    included), its footprint and its rectangle; ``settles[0]`` counts the descents.  When
-    ``signatures`` has rows, row ``o``'s holds the :func:`read_signature` of what it read.
-    ``given_top``: see :func:`_settle`.  Returns the grid's arrays."""
+    ``o`` of the ``particles`` arrays: ``shape_offsets, shape_radii, shape_start, particle_shape,
+    particle_scale, particle_rotation, particle_drop_xy``), keeping the invariant of the module docs;
+    rows from ``settled_end`` on were never settled.  ``settings``: ``floor_mode, wall_contact,
+    trial_angle, cycle_n, cycle_eps, max_events, ell``; ``grid`` the local sediment's
+    :class:`.bundles.Grid` (its arrays may be replaced as the pile grows).  Each writes its results into ``rows``
+    (:class:`Rows`; its spheres from ``spheres[sphere_row[o]]`` on, as the particle holds them, a periodic
+    box's beyond it included), its footprint and its rectangle, and its :func:`read_signature` when
+    ``rows.signatures`` has rows; ``settles[0]`` counts the descents.  ``scratch`` is a
+    :func:`new_scratch`, ``buf`` a query buffer.  ``given_top``: see :func:`_settle`.  Returns the
+    grid's arrays and the buffer."""
+    particle, work, history, trace = scratch
+    offsets, radii, start, shape, scale, rotation, drop_xy = particles
+    floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell = settings
     virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
-    settings = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
-                        grid_state[1][0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, False)
-    grid = new_grid(*grid_state)
+    descent = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
+                       grid.igeom[0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, False)
     sediment = sediment_in(centre, radius)
-    particle = new_particle(n_max)
-    work = new_workspace(np.empty(0, dtype=np.int64), np.empty(read_box.N_READS))
-    history = new_descent_history()
-    trace = np.empty((1, 16))
-    buf = np.empty(4096, dtype=np.int64)
-    periodic = grid_state[1][0] == LATERAL_PERIODIC
+    periodic = grid.igeom[0] == LATERAL_PERIODIC
+    status, footprint, rectangle, slot, count = rows.status, rows.footprint, rows.rectangle, rows.slot, rows.count
     for o in range(first, last):
         was = status[o]
         if was != ABSENT and was != WITHDRAWN:
@@ -207,24 +216,23 @@ def settle_rows(first, last, settled_end, shape_offsets, shape_radii, shape_star
         later = max(settled_end, o + 1)
         while True:
             settles[0] += 1
-            n, state, n_c, steps, chunks, buf = _settle(o, shape_offsets, shape_radii, shape_start,
-                                                        particle_shape, particle_scale, particle_rotation,
-                                                        particle_drop_xy, sediment, grid, ell, particle, work,
-                                                        history, settings, out_events[o], trace, buf, periodic,
-                                                        given_top)
+            n, state, n_c, steps, chunks, buf = _settle(o, offsets, radii, start, shape, scale, rotation, drop_xy,
+                                                        sediment, grid, ell, particle, work, history, descent,
+                                                        rows.events[o], trace, buf, periodic, given_top)
             # later rows were not there in the serial run: settle again without those it read
             if later == o + 1 or not _withdraw_met(o + 1, later, work.reads, True, status, footprint, rectangle,
                                                    slot, count, centre, radius, grid_arrays(grid), margin):
                 break
         for k in range(read_box.N_READS):
             rectangle[o, k] = work.reads[k]
-        if signatures.shape[0]:
-            count_read, digest = read_signature(rectangle[o], margin, first_key[o], grid_arrays(grid), centre, key)
-            signatures[o, 0] = count_read
-            signatures[o, 1] = np.int64(digest)
-        out_steps[o] = steps
-        out_chunks[o] = chunks
-        out_state[o] = state
+        if rows.signatures.shape[0]:
+            count_read, digest = read_signature(rectangle[o], margin, rows.first_key[o], grid_arrays(grid), centre,
+                                                key)
+            rows.signatures[o, 0] = count_read
+            rows.signatures[o, 1] = np.int64(digest)
+        rows.steps[o] = steps
+        rows.chunks[o] = chunks
+        rows.state[o] = state
         old = (footprint[o, 0], footprint[o, 1], footprint[o, 2], footprint[o, 3])
         moved = True
         if state == EVENT_LIMIT:
@@ -235,8 +243,8 @@ def settle_rows(first, last, settled_end, shape_offsets, shape_radii, shape_star
             footprint[o, 3] = -math.inf
         else:
             moved = was != WITHDRAWN or not _same_spheres(n, particle, centre, slot[o], grid.geom, grid.igeom)
-            _freeze_row(o, n, particle, n_c, sediment, grid, key, slot[o], first_key[o], out_com, out_rot,
-                        out_contacts, out_sphere, sphere_row[o], footprint)
+            _freeze_row(o, n, particle, n_c, sediment, grid, key, slot[o], rows.first_key[o], rows.com,
+                        rows.rotation, rows.contacts, rows.spheres, rows.sphere_row[o], footprint)
             status[o] = PRESENT
         # later rows settled while this one was elsewhere or absent read what changed
         if moved and later > o + 1:
@@ -247,7 +255,7 @@ def settle_rows(first, last, settled_end, shape_offsets, shape_radii, shape_star
                 _withdraw_met(o + 1, later, footprint[o], False, status, footprint, rectangle, slot, count, centre,
                               radius, grid_arrays(grid), margin)
         settled_end = later
-    return grid.memory  # the arrays themselves: borrowed views never go back to Python
+    return buf
 
 
 @jit(inline="always")  # a call would reference-count its dozen arrays and bundles, per particle
