@@ -653,10 +653,10 @@ def _update_cross_pairs_near(P, R, cross_pairs, pair_a, pair_b, is_awake, phi, l
 
 @jit
 def _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles):
-    """Per tile: the largest step of its moving spheres (3.27) and its deepest overlap over
-    the pairs with an end in it."""
-    largest = np.zeros(n_tiles)
-    deepest = np.zeros(n_tiles)
+    """Per tile of this process (rows of a ``(2, n_tiles)`` array): the largest step of its
+    moving spheres (3.27) and its deepest overlap over the pairs with an end in it."""
+    measures = np.zeros((2, n_tiles))
+    largest, deepest = measures[0], measures[1]
     for i in range(n_moving):
         largest[tile_of[i]] = max(largest[tile_of[i]], math.sqrt(_distance_sq(P, i, previous, i)))
     for p in range(phi.shape[0]):
@@ -665,14 +665,44 @@ def _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
             deepest[tile_of[pair_a[p]]] = max(deepest[tile_of[pair_a[p]]], overlap)
             if pair_b[p] < n_moving:
                 deepest[tile_of[pair_b[p]]] = max(deepest[tile_of[pair_b[p]]], overlap)
-    return largest, deepest
+    return measures
+
+
+@jit
+def _over_all_tiles(tiles, shared_tiles, halo):
+    """Maximise each row of ``tiles`` (measures, >= 0, of this process's tiles) over the processes
+    at the tiles several of them hold (``shared_tiles``: the local index of each, -1 where this
+    process holds none of it), in place, in one reduction with the largest of each row; returns
+    those (numpy's max: a NaN stays)."""
+    rows, n_shared = tiles.shape[0], shared_tiles.shape[0]
+    packed = np.zeros(rows * (n_shared + 1))
+    for r in range(rows):
+        packed[r] = tiles[r].max() if tiles.shape[1] > 0 else 0.0
+        for s in range(n_shared):
+            if shared_tiles[s] >= 0:
+                packed[rows + r * n_shared + s] = tiles[r, shared_tiles[s]]
+    packed = global_max_array(packed, halo)
+    for r in range(rows):
+        for s in range(n_shared):
+            if shared_tiles[s] >= 0:
+                tiles[r, shared_tiles[s]] = packed[rows + r * n_shared + s]
+    return packed[:rows]
+
+
+@jit
+def _any_over_all_tiles(a, b, c, halo):
+    """Whether any tile of any process is flagged in ``a``, in ``b``, in ``c``: one reduction."""
+    flags = np.array([1.0 if a.any() else 0.0, 1.0 if b.any() else 0.0, 1.0 if c.any() else 0.0])
+    flags = global_max_array(flags, halo)
+    return flags[0] > 0.0, flags[1] > 0.0, flags[2] > 0.0
 
 
 @jit
 def _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_tile):
-    """Per tile, 1.0 if one of its moving spheres overlaps a moving sphere of a jammed tile
-    (``in_jammed_tile``, per row; module docstring, "Jammed tiles"), else 0.0."""
-    pressed = np.zeros(n_tiles)
+    """Per tile (one row), 1.0 if one of its moving spheres overlaps a moving sphere of a jammed
+    tile (``in_jammed_tile``, per row; module docstring, "Jammed tiles"), else 0.0."""
+    pressed_tiles = np.zeros((1, n_tiles))
+    pressed = pressed_tiles[0]
     for p in range(phi.shape[0]):
         if phi[p] > 0.0:
             a, b = pair_a[p], pair_b[p]
@@ -680,7 +710,7 @@ def _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_ti
                 pressed[tile_of[a]] = 1.0
             if in_jammed_tile[a] and b < n_moving:
                 pressed[tile_of[b]] = 1.0
-    return pressed
+    return pressed_tiles
 
 
 @jit
@@ -811,32 +841,34 @@ def _check(state, awake, polishing, adjacency, pairs, checks, sleep, halo):
         settled, is_anchor = state
     link_ptr, link_to, pair_ptr, pair_of, pair_partner, ghost_ptr, ghost_partner = adjacency
     pair_a, pair_b, cross_pairs = pairs
-    tile_of, jammed_checks, in_jammed_tile, restless, pair_counted, tolerances, n_links, jammed_limit = checks
+    tile_of, shared_tiles, jammed_checks, in_jammed_tile, restless, pair_counted, tolerances, n_links, \
+        jammed_limit = checks
     steadiness, max_overlap, overlap = tolerances
     n_moving, n_tiles = U.shape[0], jammed_checks.shape[0]
     first_ghost = P.shape[0] - previous_ghost.shape[0]
     mean_overlap, typical_overlap = _overlaps(phi, pair_counted, link_ptr, pair_ptr, pair_of, sphere_overlap, n_links,
                                               halo)
-    tile_largest, tile_deepest = _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
-    tile_largest, tile_deepest = global_max_array(tile_largest, halo), global_max_array(tile_deepest, halo)
-    largest, deepest = tile_largest.max(), tile_deepest.max()
+    tiles = _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
+    maxima = _over_all_tiles(tiles, shared_tiles, halo)
+    largest, deepest = maxima[0], maxima[1]
     measures = (mean_overlap, typical_overlap, largest, deepest)
     if not (math.isfinite(largest) and math.isfinite(mean_overlap)):
         return NOT_FINITE, awake, polishing, False, measures
-    steady = tile_largest <= steadiness
-    too_deep = tile_deepest > max_overlap
+    steady = tiles[0] <= steadiness
+    too_deep = tiles[1] > max_overlap
     done = steady & ~too_deep & (mean_overlap <= overlap)
-    if done.all():
-        return CONVERGED, awake, polishing, False, measures
     for t in range(n_tiles):
         jammed_checks[t] = jammed_checks[t] + 1 if steady[t] and too_deep[t] else 0
     jammed = jammed_checks >= jammed_limit
-    if jammed.any() and done.any():  # a jammed tile holds open the tiles pressing on it
+    not_all_done, any_done, any_jammed = _any_over_all_tiles(~done, done, jammed, halo)
+    if not not_all_done:
+        return CONVERGED, awake, polishing, False, measures
+    if any_jammed and any_done:  # a jammed tile holds open the tiles pressing on it
         in_jammed_tile[:n_moving] = jammed[tile_of]
         share_flags(in_jammed_tile, first_ghost, halo)
-        pressed = global_max_array(_pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_tile),
-                                   halo)
-        done &= pressed == 0.0
+        pressed = _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_tile)
+        _over_all_tiles(pressed, shared_tiles, halo)
+        done &= pressed[0] == 0.0
     any_settled = done.any()
     settled[:n_moving] = done[tile_of]
     share_flags(settled, first_ghost, halo)
@@ -864,13 +896,14 @@ def _overlaps(phi, counted, link_ptr, pair_ptr, pair_of, sphere_overlap, n_links
 
 
 def minimise(problem, params, attraction_range=math.inf, exchange=None, on_iteration=None, multipliers=None,
-             tile_of=None, n_tiles=1):
+             tile_of=None, n_tiles=1, shared_tiles=None):
     """Run DAHA on ``problem`` until (3.27), (3.28) and the deepest-overlap bound hold in
     every tile, or ``max_iterations``.
 
-    ``tile_of`` gives the tile (``0 .. n_tiles - 1``, numbered alike on every process) of
-    each moving sphere, the regions that stop one by one; ``None`` is one tile, the whole
-    problem.
+    ``tile_of`` gives the tile (``0 .. n_tiles - 1``, numbered on each process) of each moving
+    sphere, the regions that stop one by one; ``None`` is one tile, the whole problem.  The
+    tiles that several processes hold are ``shared_tiles``, in one order on every process: the
+    local number of each, -1 where this process holds none of it (``None``: none).
 
     ``multipliers`` (one per candidate pair, NaN where unknown) replace the initial
     multipliers of (3.26) where given.  ``attraction_range`` is ``Delta_W`` of eq. 3.30 (``inf``: eq. 3.5).  ``exchange``
@@ -881,7 +914,8 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     ``left_halo=True`` when a sphere moved farther than ``exchange.margin``.
     """
     run = _Minimisation(problem, params, attraction_range, exchange or SerialExchange(), multipliers,
-                        np.zeros(problem.n_moving, dtype=np.int64) if tile_of is None else tile_of, n_tiles)
+                        np.zeros(problem.n_moving, dtype=np.int64) if tile_of is None else tile_of, n_tiles,
+                        np.zeros(0, dtype=np.int64) if shared_tiles is None else shared_tiles)
     while run.iteration < params.max_iterations:
         why = run.iterate(params.max_iterations if on_iteration is None else run.iteration + 1)
         if why == REFRESH_DUE:
@@ -900,9 +934,9 @@ class _Minimisation:
     """The state of one :func:`minimise` between calls of :func:`_iterations`, and the pair searches
     it returns for."""
 
-    def __init__(self, problem, params, attraction_range, exchange, multipliers, tile_of, n_tiles):
+    def __init__(self, problem, params, attraction_range, exchange, multipliers, tile_of, n_tiles, shared_tiles):
         self.problem, self.params, self.exchange = problem, params, exchange
-        self.tile_of = tile_of
+        self.tile_of, self.shared_tiles = tile_of, shared_tiles
         P, R = problem.positions, problem.radii
         n_moving, d = problem.n_moving, P.shape[1]
         self.start = P[:n_moving].copy()
@@ -963,7 +997,7 @@ class _Minimisation:
                         params.sleep_tolerance, STIFFNESS_LIMIT, MAX_DAMPING, params.multiplier_rate,
                         OVERLAP_FLOOR * params.overlap_tolerance, self.n_spheres)
         tolerances = (params.steadiness_tolerance, params.max_overlap_tolerance, params.overlap_tolerance)
-        checks = (self.tile_of, self.jammed_checks, self.in_jammed_tile, self.restless, problem.pair_counted,
+        checks = (self.tile_of, self.shared_tiles, self.jammed_checks, self.in_jammed_tile, self.restless, problem.pair_counted,
                   tolerances, self.n_links, JAMMED_CHECKS)
         self.iteration, self.awake, self.stepped, self.drift, why, self.flags, self.measures = _iterations(
             self.iteration, last, state, self.awake, self.stepped, self.drift, REFRESH_DRIFT * problem.reach,

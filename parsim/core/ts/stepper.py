@@ -509,15 +509,13 @@ class _Run:
         active = np.unique(self.domain.gather(tiles_of(self.X, seeds, self.L, k)))
         moving, anchors = select_spheres(self.X, involved[self.global_id], active, self.L, k)
         moving = moving[self._memory_order(moving)]
-        cells = tiles_of(self.X, moving, self.L, stopping_cells_per_side(k, self.L, self.contact))
-        stopping_cells = np.unique(self.domain.gather(cells))  # each stops on its own (daha.minimise)
-        cell_of = np.searchsorted(stopping_cells, cells)
+        cell_of, n_cells, shared_cells = self._stopping_cells(moving, k)
         margin = self._first_margin(drift)
         while True:
             problem, exchange = self._problem(moving, anchors, drift, margin)
             carried = self._carried_multipliers(problem) if self.daha.carry_multipliers else None
             outcome = minimise(problem, daha, self.attraction_range, exchange, multipliers=carried,
-                               tile_of=cell_of, n_tiles=stopping_cells.size)
+                               tile_of=cell_of, n_tiles=n_cells, shared_tiles=shared_cells)
             self.work += problem.n_moving * outcome.iterations
             if not outcome.left_halo:
                 break
@@ -529,6 +527,20 @@ class _Run:
         self.n_iterations += outcome.iterations
         self.max_iterations = max(self.max_iterations, outcome.iterations)
         return moving, problem, outcome
+
+    def _stopping_cells(self, moving, k):
+        """The cells the minimisation of the owned rows ``moving`` in ``k`` tiles per side stops
+        in one by one (:func:`parsim.core.ts.daha.minimise`): the cell of each moving row among
+        those of this process, how many it holds, and the cells held by several processes (in
+        the order of the grid, the same everywhere) as numbered here, -1 if not held here."""
+        cells = tiles_of(self.X, moving, self.L, stopping_cells_per_side(k, self.L, self.contact))
+        held = np.unique(cells)
+        everyone, holders = np.unique(self.domain.gather(held), return_counts=True)
+        shared = everyone[holders > 1]
+        here = np.searchsorted(held, shared)
+        found = here < held.size
+        found[found] = held[here[found]] == shared[found]
+        return np.searchsorted(held, cells), held.size, np.where(found, here, -1).astype(np.int64)
 
     def _memory_order(self, rows):
         """An order of the owned ``rows`` cell by cell on the contact grid (ties by global id), so
