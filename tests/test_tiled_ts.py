@@ -60,6 +60,7 @@ def test_a_fixed_seed_task_is_the_same_on_1_2_and_4_ranks(tmp_path):
     # a first halo margin of R / 4: minimisations leave their halo and run again with a wider one
     retried = run_probe(tmp_path, 2, *task, 3, 2, 0.25)
     assert_same_run(retried, one)
+    assert retried["attempts"] > retried["counters"][3]
     assert np.all(one["imbalance"] == 1.0) and np.all(four["imbalance"] >= 1.0)
 
 
@@ -96,6 +97,18 @@ def test_minimisations_given_up_in_tiles_are_solved_in_one_tile_on_2_ranks(tmp_p
     one_tile = simulate_ts(x, v, r, m, L, time_step_factor=TIME_STEP_FACTOR, tiles=1)
     assert_is_the_serial_run(two, one_tile)
     assert two["counters"][3] > one_tile.n_minimisations  # the attempts in tiles were made
+
+
+def test_minimisations_start_with_a_halo_the_rank_slabs_leave_room_for(tmp_path):
+    """A minimisation of this task moves a sphere farther than HALO_MARGIN radii: on 2 ranks it
+    starts with a wider margin (FIRST_MARGIN, room permitting) and is not run again from its
+    start; the run is the serial run."""
+    from tests.scripts.tiled_ts_probe import TIME_STEP_FACTOR, initial_condition
+
+    two = run_probe(tmp_path, 2, 3000, 0.3, 5)
+    assert two["attempts"] == two["counters"][3]
+    x, v, r, m, L = initial_condition(3000, 0.3, 5)
+    assert_is_the_serial_run(two, simulate_ts(x, v, r, m, L, time_step_factor=TIME_STEP_FACTOR))
 
 
 @pytest.mark.parametrize("ranks", [2, 4])

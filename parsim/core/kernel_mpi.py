@@ -17,8 +17,9 @@ stand-ins for that process.
 
 A *halo* tuple describes one rank's ghost exchange: communicator, size, the neighbours' ranks,
 which owned rows go to each (back to back, delimited by ``send_ptr``), how many ghost rows come
-from each (``recv_ptr``, stored from the first ghost row on), buffers, request slots (int64) and
-the bytes of one request, statuses,
+from each (``recv_ptr``, stored from the first ghost row on), buffers (room for every row with its
+place in the list, and a count per neighbour), request slots (int64) and the bytes of one
+request, statuses,
 the handles of MPI_DOUBLE, MPI_MAX and MPI_SUM, and a tally of what was sent
 (:func:`parsim.parallel.halo.HaloPlan.kernel_halo` builds it).  :func:`no_halo` is the
 one-process halo: the kernels then make no MPI call at all.
@@ -128,53 +129,78 @@ def _address(array, start):
 
 
 @jit
-def share_rows(values, first_ghost, halo):
-    """Overwrite the ghost rows of ``values`` (2-d, float64, from row ``first_ghost`` on) with
-    their owners' rows: one message each way per neighbour.  Collective among neighbours."""
-    _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _, _, _ = halo
+def share_changed_rows(values, first_ghost, changed, arrived, halo):
+    """Overwrite the ghost rows of ``values`` (2-d, float64, from row ``first_ghost`` on) whose
+    owners flagged them ``changed`` (a flag per owned row): each neighbour gets one message, the
+    number of its rows that changed, then each of those after its place in the neighbour's list.
+    Writes into ``arrived`` the ghost rows (counted from ``first_ghost``) that came; returns how
+    many.  Collective among neighbours."""
+    _, size, neighbours, rows, send_ptr, recv_ptr, send, receive, _, _, _, _, _, _, _ = halo
     if size == 1 or neighbours.shape[0] == 0:
-        return
-    width = values.shape[1]
-    for j in range(rows.shape[0]):
-        for k in range(width):
-            send[j * width + k] = values[rows[j], k]
-    _swap(halo, width)
-    for j in range(recv_ptr[-1]):
-        for k in range(width):
-            values[first_ghost + j, k] = receive[j * width + k]
+        return 0
+    width = values.shape[1] + 1  # the place, then the row
+    for q in range(neighbours.shape[0]):
+        start = send_ptr[q] * width + q
+        count = 0
+        for j in range(send_ptr[q], send_ptr[q + 1]):
+            if changed[rows[j]]:
+                at = start + 1 + count * width
+                send[at] = j - send_ptr[q]
+                for k in range(width - 1):
+                    send[at + 1 + k] = values[rows[j], k]
+                count += 1
+        send[start] = count
+    _swap(halo, width, True)
+    n = 0
+    for q in range(neighbours.shape[0]):
+        start = recv_ptr[q] * width + q
+        if recv_ptr[q + 1] == recv_ptr[q]:
+            continue
+        for c in range(int(receive[start])):
+            at = start + 1 + c * width
+            g = recv_ptr[q] + int(receive[at])
+            for k in range(width - 1):
+                values[first_ghost + g, k] = receive[at + 1 + k]
+            arrived[n] = g
+            n += 1
+    return n
 
 
 @jit
 def share_flags(flags, first_ghost, halo):
-    """:func:`share_rows` for a flag per row."""
+    """Overwrite the ghost rows of ``flags`` (a flag per row, from row ``first_ghost`` on) with
+    their owners' flags: one message each way per neighbour.  Collective among neighbours."""
     _, size, neighbours, rows, _, recv_ptr, send, receive, _, _, _, _, _, _, _ = halo
     if size == 1 or neighbours.shape[0] == 0:
         return
     for j in range(rows.shape[0]):
         send[j] = 1.0 if flags[rows[j]] else 0.0
-    _swap(halo, 1)
+    _swap(halo, 1, False)
     for j in range(recv_ptr[-1]):
         flags[first_ghost + j] = receive[j] > 0.5
 
 
 @jit
-def _swap(halo, width):
+def _swap(halo, width, counted):
     """Send each neighbour its part of the packed send buffer and receive its ghost rows (rows of
-    ``width`` floats); returns when both are done."""
+    ``width`` floats, all of them, or with ``counted`` as many as the part's first float says, the
+    parts one float apart); returns when both are done."""
     comm, _, neighbours, _, send_ptr, recv_ptr, send, receive, slots, request_bytes, statuses, double, _, _, \
         tally = halo
     requests = slots.view(np.uint8)  # the library's requests back to back, whatever their size
     started = _wtime()
     n = 0
     failed = 0
+    slot = 1 if counted else 0  # the count before each part
     for q in range(neighbours.shape[0]):  # every receive and send posted, then all awaited
-        first, last = recv_ptr[q] * width, recv_ptr[q + 1] * width
+        first, last = recv_ptr[q] * width + q * slot, recv_ptr[q + 1] * width + q * slot
         if last > first:
-            failed |= _irecv(_address(receive, first), last - first, double, neighbours[q], ROWS_TAG, comm,
+            failed |= _irecv(_address(receive, first), last - first + slot, double, neighbours[q], ROWS_TAG, comm,
                              _address(requests, n * request_bytes))
             n += 1
-        first, last = send_ptr[q] * width, send_ptr[q + 1] * width
+        first, last = send_ptr[q] * width + q * slot, send_ptr[q + 1] * width + q * slot
         if last > first:
+            last = first + 1 + int(send[first]) * width if counted else last
             failed |= _isend(_address(send, first), last - first, double, neighbours[q], ROWS_TAG, comm,
                              _address(requests, n * request_bytes))
             n += 1

@@ -83,14 +83,17 @@ class HaloPlan:
 
     def kernel_halo(self, width: int, tally=None) -> tuple:
         """This plan as a halo of :mod:`parsim.core.kernel_mpi`, for exchanges from jitted loops:
-        rows of up to ``width`` floats; what they send is added to ``tally`` (``N_TALLIES`` floats)."""
+        rows of up to ``width`` floats, each with its place, and a count per neighbour; what they
+        send is added to ``tally`` (``N_TALLIES`` floats)."""
         comm = self.decomposition.comm
         send_counts = np.array([len(rows) for rows in self.send_indices], dtype=np.int64)
         rows = np.concatenate([np.asarray(r, dtype=np.int64) for r in self.send_indices] + [np.zeros(0, np.int64)])
-        n_requests = max(2 * len(self.decomposition.neighbours), 1)
+        n_neighbours = len(self.decomposition.neighbours)
+        n_requests = max(2 * n_neighbours, 1)
         return (_handle(comm), np.int64(comm.Get_size()), np.asarray(self.decomposition.neighbours, dtype=np.int32),
-                rows, _offsets(send_counts), _offsets(self.ghost_counts), np.zeros(len(rows) * width),
-                np.zeros(self.n_ghost * width), np.zeros(n_requests, dtype=np.int64),
+                rows, _offsets(send_counts), _offsets(self.ghost_counts),
+                np.zeros(len(rows) * (width + 1) + n_neighbours), np.zeros(self.n_ghost * (width + 1) + n_neighbours),
+                np.zeros(n_requests, dtype=np.int64),
                 np.int64(MPI._sizeof(MPI.Request)), np.zeros(n_requests * kernel_mpi.STATUS_INTS, dtype=np.int32), _handle(MPI.DOUBLE), _handle(MPI.MAX),
                 _handle(MPI.SUM), np.zeros(kernel_mpi.N_TALLIES) if tally is None else tally)
 

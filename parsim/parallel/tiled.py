@@ -15,9 +15,9 @@ is given a :class:`DecomposedDomain` (the interface is in :mod:`parsim.core.ts.d
   (:func:`parsim.parallel.migration.migrate`); when the owned spheres differ by more than
   ``REBALANCE_ABOVE`` (max / mean) the tile blocks are first moved to even them out;
 - the halos of contact searches, quiet-step bounds and minimisations are
-  :class:`parsim.parallel.halo.HaloPlan` s; in a minimisation every DAHA iteration refreshes
-  the ghost rows (positions, and the sleeping flags) from inside the jitted loop
-  (:mod:`parsim.core.kernel_mpi`), which also reduces the stopping tests; what runs in Python
+  :class:`parsim.parallel.halo.HaloPlan` s; in a minimisation every DAHA iteration sends each
+  neighbour, in one message from inside the jitted loop (:mod:`parsim.core.kernel_mpi`), the
+  ghost rows that moved (position, velocity, damping), and reduces the stopping tests; what runs in Python
   (pair searches) exchanges through :class:`_ProblemExchange`;
 - the radii, masses, cluster labels and links are known on every rank: new links are
   gathered on all ranks each time step (a few per sphere over a whole run), so the cluster
@@ -37,6 +37,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsim.core import kernel_mpi
+from parsim.core.ts.daha import motion_width
 from parsim.parallel.decomposition import Decomposition
 from parsim.parallel.halo import HaloPlan
 from parsim.parallel.migration import migrate
@@ -108,7 +109,7 @@ class _ProblemExchange:
         self.margin = margin
         self.active = domain.size > 1
         if self.active:
-            self.kernel_halo = halo.plan.kernel_halo(domain.dimension, domain.traffic.kernel)
+            self.kernel_halo = halo.plan.kernel_halo(motion_width(domain.dimension), domain.traffic.kernel)
         else:
             self.kernel_halo = kernel_mpi.no_halo()
 

@@ -187,12 +187,21 @@ def check_halo(decomposition, world, positions, ids, records, width) -> int:
 
 def check_kernel_halo(decomposition, plan, owned_positions, owned_ids, ghost_positions, ghost_ids):
     """The jitted exchange (parsim.core.kernel_mpi) fills the ghost rows as the brute-force search
-    expects, flags included, and its global maximum is the ranks' maximum."""
+    expects, the rows that changed alone when so asked, flags included, and its global maximum is
+    the ranks' maximum."""
     n_owned, dimension = owned_positions.shape
     halo = plan.kernel_halo(dimension)
     rows = np.vstack([owned_positions, np.full((plan.n_ghost, dimension), np.nan)])
-    kernel_mpi.share_rows(rows, n_owned, halo)
+    arrived = np.empty(plan.n_ghost, dtype=np.int64)
+    n = kernel_mpi.share_changed_rows(rows, n_owned, np.ones(n_owned, dtype=bool), arrived, halo)
     assert np.array_equal(rows[:n_owned], owned_positions) and np.array_equal(rows[n_owned:], ghost_positions)
+    assert np.array_equal(np.sort(arrived[:n]), np.arange(plan.n_ghost))
+    rows[:n_owned] += 1.0  # every owned row moves, a third of them is sent
+    n = kernel_mpi.share_changed_rows(rows, n_owned, owned_ids % 3 == 0, arrived, halo)
+    sent = ghost_ids % 3 == 0
+    assert np.array_equal(np.sort(arrived[:n]), np.flatnonzero(sent))
+    assert np.array_equal(rows[n_owned:][sent], ghost_positions[sent] + 1.0)
+    assert np.array_equal(rows[n_owned:][~sent], ghost_positions[~sent])
     flags = np.concatenate([owned_ids % 3 == 0, np.zeros(plan.n_ghost, dtype=bool)])
     kernel_mpi.share_flags(flags, n_owned, halo)
     assert np.array_equal(flags[n_owned:], ghost_ids % 3 == 0)
@@ -202,7 +211,7 @@ def check_kernel_halo(decomposition, plan, owned_positions, owned_ids, ghost_pos
     spread = kernel_mpi.global_max_array(np.array([decomposition.rank, -decomposition.rank], dtype=float), halo)
     assert np.array_equal(spread, [size - 1, 0.0])
     sending = sum(len(rows) > 0 for rows in plan.send_indices) if size > 1 else 0
-    assert halo[-1][kernel_mpi.MESSAGES] == 2 * sending, (halo[-1], sending)
+    assert halo[-1][kernel_mpi.MESSAGES] == 3 * sending, (halo[-1], sending)
 
 
 def main(out: str, dimension: int) -> None:

@@ -190,7 +190,12 @@ returns to Python only for what Python does (:class:`_Minimisation`): after a ch
 settled tiles and sleeping spheres; and before an iteration whose pairs must be searched again.
 The operations are those of the former loop in Python, in the same order: one process gives the
 same result bit for bit, without leaving numba at every iteration (at N = 10^5 those round trips
-were 40 % of a time step).
+were 40 % of a time step).  Each iteration sends each neighbour one message, after (3.23): the
+position, velocity and damping of the awake spheres it holds as ghosts (:func:`_share_motion`),
+the only rows that changed; the receiver marks those ghosts awake, the others asleep, and makes
+the next half drift (3.20) of its ghosts itself, with their owners' velocities (a sphere at rest
+on its owner has a zero velocity there too: :func:`_drift_ghosts`, :func:`_stop_ghosts`).  Checks
+add the flags of settled tiles and sleeping spheres.
 
 Candidate pairs.  The pairs that can touch are those with a gap of at most ``problem.reach``.
 They are kept as a Verlet list refreshed sphere by sphere: once a sphere is ``REFRESH_DRIFT``
@@ -211,7 +216,7 @@ import numpy as np
 
 from parsim.core import kernel_mpi
 from parsim.core.jit import jit
-from parsim.core.kernel_mpi import global_max, global_max_array, global_sum, share_flags, share_rows
+from parsim.core.kernel_mpi import global_max, global_max_array, global_sum, share_changed_rows, share_flags
 from parsim.core.ts.contacts import _distance_sq
 
 #: With dynamic parameters, phi_A below OVERLAP_FLOOR x eps_c counts as no overlap at all.
@@ -439,17 +444,17 @@ def _wake_ghost_partners(g, first_ghost, is_awake, ghost_ptr, ghost_partner, wok
 
 
 @jit
-def _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, link_ptr, link_to, pair_ptr,
+def _spread(P, previous, previous_ghost, arrived, awake, is_awake, n_moving, first_ghost, link_ptr, link_to, pair_ptr,
             pair_partner, ghost_ptr, ghost_partner, tolerance):
     """The awake spheres after a partial iteration: those awake, and the partners of those
-    (moving ghosts included) that moved more than ``tolerance`` (a disturbance travels one
-    contact per iteration)."""
+    (moving ghosts included: the ghost rows that ``arrived`` from their owners) that moved more
+    than ``tolerance`` (a disturbance travels one contact per iteration)."""
     woken = np.empty(n_moving, dtype=np.int64)
     count = 0
     for i in awake:
         if _distance_sq(P, i, previous, i) > tolerance * tolerance:
             count = _wake_partners(i, n_moving, is_awake, link_ptr, link_to, pair_ptr, pair_partner, woken, count)
-    for g in range(ghost_ptr.shape[0] - 1):
+    for g in arrived:
         if ghost_ptr[g + 1] > ghost_ptr[g] and _distance_sq(P, first_ghost + g, previous_ghost, g) > tolerance**2:
             count = _wake_ghost_partners(g, first_ghost, is_awake, ghost_ptr, ghost_partner, woken, count)
     if count == 0:
@@ -458,14 +463,14 @@ def _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost,
 
 
 @jit
-def _spread_dense(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, link_ptr, link_to, pair_a,
-                  pair_b, tolerance):
+def _spread_dense(P, previous, previous_ghost, arrived, awake, is_awake, n_moving, first_ghost, link_ptr, link_to,
+                  pair_a, pair_b, tolerance):
     """:func:`_spread` pair by pair and link by link, the same awake spheres: cheaper when most
     spheres are awake (it visits each pair once, in memory order, not from both ends)."""
     moved = np.zeros(P.shape[0], dtype=np.bool_)
     for i in awake:
         moved[i] = _distance_sq(P, i, previous, i) > tolerance * tolerance
-    for g in range(P.shape[0] - first_ghost):
+    for g in arrived:
         moved[first_ghost + g] = _distance_sq(P, first_ghost + g, previous_ghost, g) > tolerance * tolerance
     woken = np.empty(n_moving, dtype=np.int64)
     count = 0
@@ -653,10 +658,10 @@ def _update_cross_pairs_near(P, R, cross_pairs, pair_a, pair_b, is_awake, phi, l
 
 @jit
 def _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles):
-    """Per tile: the largest step of its moving spheres (3.27) and its deepest overlap over
-    the pairs with an end in it."""
-    largest = np.zeros(n_tiles)
-    deepest = np.zeros(n_tiles)
+    """Per tile of this process (rows of a ``(2, n_tiles)`` array): the largest step of its
+    moving spheres (3.27) and its deepest overlap over the pairs with an end in it."""
+    measures = np.zeros((2, n_tiles))
+    largest, deepest = measures[0], measures[1]
     for i in range(n_moving):
         largest[tile_of[i]] = max(largest[tile_of[i]], math.sqrt(_distance_sq(P, i, previous, i)))
     for p in range(phi.shape[0]):
@@ -665,14 +670,44 @@ def _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
             deepest[tile_of[pair_a[p]]] = max(deepest[tile_of[pair_a[p]]], overlap)
             if pair_b[p] < n_moving:
                 deepest[tile_of[pair_b[p]]] = max(deepest[tile_of[pair_b[p]]], overlap)
-    return largest, deepest
+    return measures
+
+
+@jit
+def _over_all_tiles(tiles, shared_tiles, halo):
+    """Maximise each row of ``tiles`` (measures, >= 0, of this process's tiles) over the processes
+    at the tiles several of them hold (``shared_tiles``: the local index of each, -1 where this
+    process holds none of it), in place, in one reduction with the largest of each row; returns
+    those (numpy's max: a NaN stays)."""
+    rows, n_shared = tiles.shape[0], shared_tiles.shape[0]
+    packed = np.zeros(rows * (n_shared + 1))
+    for r in range(rows):
+        packed[r] = tiles[r].max() if tiles.shape[1] > 0 else 0.0
+        for s in range(n_shared):
+            if shared_tiles[s] >= 0:
+                packed[rows + r * n_shared + s] = tiles[r, shared_tiles[s]]
+    packed = global_max_array(packed, halo)
+    for r in range(rows):
+        for s in range(n_shared):
+            if shared_tiles[s] >= 0:
+                tiles[r, shared_tiles[s]] = packed[rows + r * n_shared + s]
+    return packed[:rows]
+
+
+@jit
+def _any_over_all_tiles(a, b, c, halo):
+    """Whether any tile of any process is flagged in ``a``, in ``b``, in ``c``: one reduction."""
+    flags = np.array([1.0 if a.any() else 0.0, 1.0 if b.any() else 0.0, 1.0 if c.any() else 0.0])
+    flags = global_max_array(flags, halo)
+    return flags[0] > 0.0, flags[1] > 0.0, flags[2] > 0.0
 
 
 @jit
 def _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_tile):
-    """Per tile, 1.0 if one of its moving spheres overlaps a moving sphere of a jammed tile
-    (``in_jammed_tile``, per row; module docstring, "Jammed tiles"), else 0.0."""
-    pressed = np.zeros(n_tiles)
+    """Per tile (one row), 1.0 if one of its moving spheres overlaps a moving sphere of a jammed
+    tile (``in_jammed_tile``, per row; module docstring, "Jammed tiles"), else 0.0."""
+    pressed_tiles = np.zeros((1, n_tiles))
+    pressed = pressed_tiles[0]
     for p in range(phi.shape[0]):
         if phi[p] > 0.0:
             a, b = pair_a[p], pair_b[p]
@@ -680,7 +715,7 @@ def _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_ti
                 pressed[tile_of[a]] = 1.0
             if in_jammed_tile[a] and b < n_moving:
                 pressed[tile_of[b]] = 1.0
-    return pressed
+    return pressed_tiles
 
 
 @jit
@@ -721,6 +756,78 @@ def _drop_settled(awake, settled, is_awake):
 
 
 
+def motion_width(dimension):
+    """Floats per row that the iterations send a neighbour: a moving sphere's position, velocity
+    and damping (:func:`_share_motion`)."""
+    return 2 * dimension + 1
+
+
+@jit
+def _drift_ghosts(P, ghost_U, previous_ghost, first_ghost, h):
+    """(3.20) for the ghost rows, as their owners do it: ``ghost_U`` is each one's velocity on its
+    owner, zero for a sphere at rest there (asleep, settled, an anchor), which the owner does not
+    move; the rows that move keep their start in ``previous_ghost``."""
+    d = P.shape[1]
+    for g in range(ghost_U.shape[0]):
+        if _is_moving(ghost_U, g):
+            for k in range(d):
+                previous_ghost[g, k] = P[first_ghost + g, k]
+                P[first_ghost + g, k] += h * ghost_U[g, k]
+
+
+@jit
+def _is_moving(U, i):
+    """Whether row ``i`` of the velocities ``U`` is not zero."""
+    for k in range(U.shape[1]):
+        if U[i, k] != 0.0:
+            return True
+    return False
+
+
+@jit
+def _share_motion(P, U, damping_of, previous_ghost, is_awake, awake, ghost_motion, halo):
+    """After (3.23): each neighbour gets, in one message, the position, velocity and damping of the
+    ``awake`` spheres it holds as ghosts (the rows that changed); the ghost rows that come are
+    ``arrived[:n]`` (returns ``n``), awake (``is_awake``) as on their owners, the others asleep.
+    Their start stays in ``previous_ghost``."""
+    ghost_U, motion, changed, sends, arrived = ghost_motion
+    first_ghost, d = P.shape[0] - ghost_U.shape[0], P.shape[1]
+    if halo[2].shape[0] == 0:  # no neighbour
+        return 0
+    for i in awake:
+        if sends[i]:
+            changed[i] = True
+            for k in range(d):
+                motion[i, k] = P[i, k]
+                motion[i, d + k] = U[i, k]
+            motion[i, 2 * d] = damping_of[i]
+    n = share_changed_rows(motion, first_ghost, changed, arrived, halo)
+    for i in awake:
+        changed[i] = False
+    is_awake[first_ghost:] = False
+    for g in arrived[:n]:
+        row = first_ghost + g
+        if not _is_moving(ghost_U, g):  # not drifted: still at its start
+            for k in range(d):
+                previous_ghost[g, k] = P[row, k]
+        for k in range(d):
+            P[row, k] = motion[row, k]
+            ghost_U[g, k] = motion[row, d + k]
+        damping_of[row] = motion[row, 2 * d]
+        is_awake[row] = True
+    return n
+
+
+@jit
+def _stop_ghosts(ghost_U, flags, first_ghost, stop_flagged):
+    """Zero the velocity of the ghost rows whose flag (per row) is ``stop_flagged``, as their
+    owners zero it (settled tiles, sleeping spheres: :func:`_check`)."""
+    for g in range(ghost_U.shape[0]):
+        if flags[first_ghost + g] == stop_flagged:
+            for k in range(ghost_U.shape[1]):
+                ghost_U[g, k] = 0.0
+
+
 #: Why :func:`_iterations` returned: it reached the iteration it was asked to stop at, the pairs
 #: must be searched again before the next iteration moves anything, the stopping tests hold, or a
 #: position or the mean overlap is not finite.
@@ -730,7 +837,7 @@ _GO_ON = -1
 
 @jit
 def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags, measures, adjacency, pairs,
-                coefficients, checks, dynamic, halo):
+                coefficients, checks, dynamic, ghost_motion, halo):
     """DAHA iterations from ``iteration`` on, in one call, with the ghost rows and the reductions
     exchanged from here (:mod:`parsim.core.kernel_mpi`), until ``last``, the stopping tests, a
     non-finite value, or an iteration whose pairs must be searched again (the global ``drift``
@@ -751,7 +858,7 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags
     polishing, any_settled = flags
     n_moving = U.shape[0]
     first_ghost = P.shape[0] - previous_ghost.shape[0]
-    damping_rows = damping_of.reshape((damping_of.shape[0], 1))
+    ghost_U, arrived = ghost_motion[0], ghost_motion[4]
     while iteration < last:
         guarded = max(measures[1], floor)
         rate = delta * multiplier_rate * (math.sqrt(n_spheres) / guarded if dynamic else 1.0)
@@ -764,16 +871,13 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags
         if full:
             awake = _drop_settled(np.arange(n_moving), settled, is_awake) if any_settled else np.arange(n_moving)
         stepped = awake
-        previous_ghost[:] = P[first_ghost:]
         _drift(P, U, awake, 0.5 * delta)
-        share_rows(P, first_ghost, halo)
+        _drift_ghosts(P, ghost_U, previous_ghost, first_ghost, 0.5 * delta)
         _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_partner, lam, sphere_overlap,
                          guarded, dynamic, delta, alpha, gamma, c_bar, attracts, new, damping_of, stiffness_limit,
                          max_damping)
         _copy_rows(P, new, awake)  # accept the new positions
-        share_rows(P, first_ghost, halo)
-        if dynamic:
-            share_rows(damping_rows, first_ghost, halo)
+        n_arrived = _share_motion(P, U, damping_of, previous_ghost, is_awake, awake, ghost_motion, halo)
         mostly_awake = 2 * awake.shape[0] > n_moving  # then pair by pair beats sphere by sphere
         if full:
             _update_multipliers(P, R, phi, pair_a, pair_b, lam, rate, damping_of, stable, settled | is_anchor)
@@ -786,24 +890,23 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags
         iteration += 1
         if check:
             why, awake, polishing, any_settled, measures = _check(state, awake, polishing, adjacency, pairs, checks,
-                                                                  sleep, halo)
+                                                                  sleep, ghost_U, halo)
             if why != _GO_ON:
                 return iteration, awake, stepped, drift, why, (polishing, any_settled), measures
             continue
         if mostly_awake:
-            awake = _spread_dense(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, link_ptr,
-                                  link_to, pair_a, pair_b, sleep)
+            awake = _spread_dense(P, previous, previous_ghost, arrived[:n_arrived], awake, is_awake, n_moving,
+                                  first_ghost, link_ptr, link_to, pair_a, pair_b, sleep)
         else:
-            awake = _spread(P, previous, previous_ghost, awake, is_awake, n_moving, first_ghost, link_ptr, link_to,
-                            pair_ptr, pair_partner, ghost_ptr, ghost_partner, sleep)
+            awake = _spread(P, previous, previous_ghost, arrived[:n_arrived], awake, is_awake, n_moving, first_ghost,
+                            link_ptr, link_to, pair_ptr, pair_partner, ghost_ptr, ghost_partner, sleep)
         if any_settled:
             awake = _drop_settled(awake, settled, is_awake)
-        share_flags(is_awake, first_ghost, halo)
     return iteration, awake, stepped, drift, REACHED_LAST, (polishing, any_settled), measures
 
 
 @jit
-def _check(state, awake, polishing, adjacency, pairs, checks, sleep, halo):
+def _check(state, awake, polishing, adjacency, pairs, checks, sleep, ghost_U, halo):
     """The tests after a check iteration (module docstring, "Stopping tile by tile", "Jammed
     tiles", "Polishing"): ``(why, awake, polishing, any_settled, measures)``, ``why`` CONVERGED,
     NOT_FINITE or ``_GO_ON``; settles tiles and puts spheres to sleep when it goes on."""
@@ -811,38 +914,41 @@ def _check(state, awake, polishing, adjacency, pairs, checks, sleep, halo):
         settled, is_anchor = state
     link_ptr, link_to, pair_ptr, pair_of, pair_partner, ghost_ptr, ghost_partner = adjacency
     pair_a, pair_b, cross_pairs = pairs
-    tile_of, jammed_checks, in_jammed_tile, restless, pair_counted, tolerances, n_links, jammed_limit = checks
+    tile_of, shared_tiles, jammed_checks, in_jammed_tile, restless, pair_counted, tolerances, n_links, \
+        jammed_limit = checks
     steadiness, max_overlap, overlap = tolerances
     n_moving, n_tiles = U.shape[0], jammed_checks.shape[0]
     first_ghost = P.shape[0] - previous_ghost.shape[0]
     mean_overlap, typical_overlap = _overlaps(phi, pair_counted, link_ptr, pair_ptr, pair_of, sphere_overlap, n_links,
                                               halo)
-    tile_largest, tile_deepest = _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
-    tile_largest, tile_deepest = global_max_array(tile_largest, halo), global_max_array(tile_deepest, halo)
-    largest, deepest = tile_largest.max(), tile_deepest.max()
+    tiles = _tile_measures(P, previous, phi, pair_a, pair_b, n_moving, tile_of, n_tiles)
+    maxima = _over_all_tiles(tiles, shared_tiles, halo)
+    largest, deepest = maxima[0], maxima[1]
     measures = (mean_overlap, typical_overlap, largest, deepest)
     if not (math.isfinite(largest) and math.isfinite(mean_overlap)):
         return NOT_FINITE, awake, polishing, False, measures
-    steady = tile_largest <= steadiness
-    too_deep = tile_deepest > max_overlap
+    steady = tiles[0] <= steadiness
+    too_deep = tiles[1] > max_overlap
     done = steady & ~too_deep & (mean_overlap <= overlap)
-    if done.all():
-        return CONVERGED, awake, polishing, False, measures
     for t in range(n_tiles):
         jammed_checks[t] = jammed_checks[t] + 1 if steady[t] and too_deep[t] else 0
     jammed = jammed_checks >= jammed_limit
-    if jammed.any() and done.any():  # a jammed tile holds open the tiles pressing on it
+    not_all_done, any_done, any_jammed = _any_over_all_tiles(~done, done, jammed, halo)
+    if not not_all_done:
+        return CONVERGED, awake, polishing, False, measures
+    if any_jammed and any_done:  # a jammed tile holds open the tiles pressing on it
         in_jammed_tile[:n_moving] = jammed[tile_of]
         share_flags(in_jammed_tile, first_ghost, halo)
-        pressed = global_max_array(_pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_tile),
-                                   halo)
-        done &= pressed == 0.0
+        pressed = _pressed_tiles(phi, pair_a, pair_b, n_moving, tile_of, n_tiles, in_jammed_tile)
+        _over_all_tiles(pressed, shared_tiles, halo)
+        done &= pressed[0] == 0.0
     any_settled = done.any()
     settled[:n_moving] = done[tile_of]
     share_flags(settled, first_ghost, halo)
     for i in range(n_moving):
         if settled[i]:
             U[i, :] = 0.0
+    _stop_ghosts(ghost_U, settled, first_ghost, True)
     if sleep > 0.0:
         polishing = (polishing or largest <= steadiness) and mean_overlap <= overlap
         _restless(P, previous, phi, pair_ptr, pair_of, sleep, overlap**2, settled, restless)
@@ -852,6 +958,7 @@ def _check(state, awake, polishing, adjacency, pairs, checks, sleep, halo):
         if any_settled:
             awake = _drop_settled(awake, settled, is_awake)
         share_flags(is_awake, first_ghost, halo)
+        _stop_ghosts(ghost_U, is_awake, first_ghost, False)
     return _GO_ON, awake, polishing, any_settled, measures
 
 
@@ -864,13 +971,14 @@ def _overlaps(phi, counted, link_ptr, pair_ptr, pair_of, sphere_overlap, n_links
 
 
 def minimise(problem, params, attraction_range=math.inf, exchange=None, on_iteration=None, multipliers=None,
-             tile_of=None, n_tiles=1):
+             tile_of=None, n_tiles=1, shared_tiles=None):
     """Run DAHA on ``problem`` until (3.27), (3.28) and the deepest-overlap bound hold in
     every tile, or ``max_iterations``.
 
-    ``tile_of`` gives the tile (``0 .. n_tiles - 1``, numbered alike on every process) of
-    each moving sphere, the regions that stop one by one; ``None`` is one tile, the whole
-    problem.
+    ``tile_of`` gives the tile (``0 .. n_tiles - 1``, numbered on each process) of each moving
+    sphere, the regions that stop one by one; ``None`` is one tile, the whole problem.  The
+    tiles that several processes hold are ``shared_tiles``, in one order on every process: the
+    local number of each, -1 where this process holds none of it (``None``: none).
 
     ``multipliers`` (one per candidate pair, NaN where unknown) replace the initial
     multipliers of (3.26) where given.  ``attraction_range`` is ``Delta_W`` of eq. 3.30 (``inf``: eq. 3.5).  ``exchange``
@@ -881,7 +989,8 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     ``left_halo=True`` when a sphere moved farther than ``exchange.margin``.
     """
     run = _Minimisation(problem, params, attraction_range, exchange or SerialExchange(), multipliers,
-                        np.zeros(problem.n_moving, dtype=np.int64) if tile_of is None else tile_of, n_tiles)
+                        np.zeros(problem.n_moving, dtype=np.int64) if tile_of is None else tile_of, n_tiles,
+                        np.zeros(0, dtype=np.int64) if shared_tiles is None else shared_tiles)
     while run.iteration < params.max_iterations:
         why = run.iterate(params.max_iterations if on_iteration is None else run.iteration + 1)
         if why == REFRESH_DUE:
@@ -900,9 +1009,9 @@ class _Minimisation:
     """The state of one :func:`minimise` between calls of :func:`_iterations`, and the pair searches
     it returns for."""
 
-    def __init__(self, problem, params, attraction_range, exchange, multipliers, tile_of, n_tiles):
+    def __init__(self, problem, params, attraction_range, exchange, multipliers, tile_of, n_tiles, shared_tiles):
         self.problem, self.params, self.exchange = problem, params, exchange
-        self.tile_of = tile_of
+        self.tile_of, self.shared_tiles = tile_of, shared_tiles
         P, R = problem.positions, problem.radii
         n_moving, d = problem.n_moving, P.shape[1]
         self.start = P[:n_moving].copy()
@@ -920,6 +1029,12 @@ class _Minimisation:
         self.n_links = exchange.sum(float(problem.n_links))
         self.n_spheres = exchange.sum(float(n_moving))
         self.halo = exchange.kernel_halo
+        n_rows, n_ghost = P.shape[0], P.shape[0] - problem.first_ghost
+        sends = np.zeros(n_rows, dtype=np.bool_)
+        sends[self.halo[3]] = True  # the owned rows some neighbour holds as ghosts
+        # ghost velocities as on their owners, rows sent and received, flags of the changed rows, ghost rows arrived
+        self.ghost_motion = (np.zeros((n_ghost, d)), np.zeros((n_rows, motion_width(d))),
+                             np.zeros(n_rows, dtype=np.bool_), sends, np.empty(n_ghost, dtype=np.int64))
         mean_overlap, typical_overlap = _overlaps(self.phi, problem.pair_counted, problem.link_ptr, problem.pair_ptr,
                                                   problem.pair_of, self.sphere_overlap, self.n_links, self.halo)
         self.measures = (mean_overlap, typical_overlap, math.inf, math.inf)  # and the largest step, deepest overlap
@@ -963,12 +1078,12 @@ class _Minimisation:
                         params.sleep_tolerance, STIFFNESS_LIMIT, MAX_DAMPING, params.multiplier_rate,
                         OVERLAP_FLOOR * params.overlap_tolerance, self.n_spheres)
         tolerances = (params.steadiness_tolerance, params.max_overlap_tolerance, params.overlap_tolerance)
-        checks = (self.tile_of, self.jammed_checks, self.in_jammed_tile, self.restless, problem.pair_counted,
+        checks = (self.tile_of, self.shared_tiles, self.jammed_checks, self.in_jammed_tile, self.restless, problem.pair_counted,
                   tolerances, self.n_links, JAMMED_CHECKS)
         self.iteration, self.awake, self.stepped, self.drift, why, self.flags, self.measures = _iterations(
             self.iteration, last, state, self.awake, self.stepped, self.drift, REFRESH_DRIFT * problem.reach,
             self.flags, self.measures, adjacency, (problem.pair_a, problem.pair_b, problem.cross_pairs),
-            coefficients, checks, params.dynamic, self.halo)
+            coefficients, checks, params.dynamic, self.ghost_motion, self.halo)
         return why
 
     def left_halo(self):

@@ -86,10 +86,15 @@ TABLE1_TIME_STEP_FACTORS = (0.005, 0.01, 0.015)
 CONTACT_CELLS_PER_SPHERE = 4
 #: Gap (in mean radii) below which two interacting spheres get a constraint multiplier.
 CANDIDATE_REACH = 1.0
-#: How far (in largest radii) a sphere may first move in one minimisation of a decomposed run
-#: (the halo is that much wider on both sides); a minimisation that goes farther is run again
-#: from its start with the margin doubled, which gives the same result.
+#: How far (in largest radii) a sphere may move in one minimisation of a decomposed run, at least
+#: (the halo is that much wider on both sides; the rank blocks' tiles are sized for it) ...
 HALO_MARGIN = 2.0
+#: ... and at most at first, where the narrowest rank slab leaves room.  A minimisation that
+#: goes farther is run again from its start with the margin doubled, which gives the same
+#: result: at N = 10^6, V_f = 0.3 first-step minimisations moved spheres up to 4.8 radii, and
+#: from a first margin of 2 radii two of the first 13 were run again, 30 % more sphere updates
+#: on each of 2 ranks; a full run at N = 10^5 moved them up to 3.1 radii.
+FIRST_MARGIN = 6.0
 #: A minimisation that moves a sphere farther than this (in largest radii) has gone unstable
 #: and is reported (DAHA resolves overlaps of at most 2 R; a few radii of chain pushing is normal).
 MAX_DISPLACEMENT = 10.0
@@ -215,9 +220,10 @@ class _Run:
         self.contact = 2.0 * float(R.max())
         self.grid_k, self.grid_side = grid_size(L, self.contact, d, n, CONTACT_CELLS_PER_SPHERE)
         self.min_tile = max(self.contact + self.reach, attraction_range if math.isfinite(attraction_range) else 0.0)
-        self.margin = HALO_MARGIN * float(R.max())
+        self.margin = HALO_MARGIN * float(R.max())  # raised when a minimisation leaves its halo
+        self.first_margin = FIRST_MARGIN * float(R.max())
         self.max_displacement = MAX_DISPLACEMENT * float(R.max())
-        self.global_id, self.X, self.V = domain.distribute(X, V, self._problem_width(0.0))
+        self.global_id, self.X, self.V = domain.distribute(X, V, self._problem_width(0.0, self.margin))
         self.R = R[self.global_id]
         self.own_cluster = self.cluster[self.global_id]  # the cluster labels of the owned rows
         self.local_of = np.full(n, -1, dtype=np.int64)
@@ -381,10 +387,16 @@ class _Run:
         keys = np.unique(self.domain.gather(named[:, 0] * self.n + named[:, 1]))  # a 1-d sort: 6x faster
         return np.column_stack([keys // self.n, keys % self.n])
 
-    def _problem_width(self, drift):
-        """Halo width of a minimisation: the reach of its pairs and links, twice the margin
+    def _problem_width(self, drift, margin):
+        """Halo width of a minimisation: the reach of its pairs and links, twice the ``margin``
         (both ends move), and ``drift``, how far spheres moved earlier in the time step."""
-        return max(self.contact + self.reach, self.min_tile) + 2.0 * self.margin + drift
+        return max(self.contact + self.reach, self.min_tile) + 2.0 * margin + drift
+
+    def _first_margin(self, drift):
+        """The margin a minimisation starts with: ``first_margin``, or what the narrowest rank
+        slab leaves room for, but not less than ``margin`` (the same on every process)."""
+        room = 0.5 * (self.domain.max_halo_width - self._problem_width(drift, 0.0))
+        return max(self.margin, min(self.first_margin, room))
 
     def _drift(self, start, rows):
         """Largest displacement since ``start`` of the owned ``rows``, over all processes."""
@@ -491,30 +503,44 @@ class _Run:
         """DAHA (parameters ``daha``) on the ``involved`` spheres in the tiles (``k`` per side)
         holding an end of a ``latest`` link, the surrounding tiles' as anchors:
         ``(moving, problem, outcome)``.
-        A sphere leaving the halo doubles the margin and starts again.  A failed attempt in
+        A sphere leaving the halo doubles the margin (:meth:`_first_margin`) and starts again.  A failed attempt in
         some tiles counts as a minimisation of its own."""
         seeds = np.flatnonzero(np.isin(self.global_id, latest.reshape(-1)))
         active = np.unique(self.domain.gather(tiles_of(self.X, seeds, self.L, k)))
         moving, anchors = select_spheres(self.X, involved[self.global_id], active, self.L, k)
         moving = moving[self._memory_order(moving)]
-        cells = tiles_of(self.X, moving, self.L, stopping_cells_per_side(k, self.L, self.contact))
-        stopping_cells = np.unique(self.domain.gather(cells))  # each stops on its own (daha.minimise)
-        cell_of = np.searchsorted(stopping_cells, cells)
+        cell_of, n_cells, shared_cells = self._stopping_cells(moving, k)
+        margin = self._first_margin(drift)
         while True:
-            problem, exchange = self._problem(moving, anchors, drift)
+            problem, exchange = self._problem(moving, anchors, drift, margin)
             carried = self._carried_multipliers(problem) if self.daha.carry_multipliers else None
             outcome = minimise(problem, daha, self.attraction_range, exchange, multipliers=carried,
-                               tile_of=cell_of, n_tiles=stopping_cells.size)
+                               tile_of=cell_of, n_tiles=n_cells, shared_tiles=shared_cells)
             self.work += problem.n_moving * outcome.iterations
             if not outcome.left_halo:
                 break
-            self.margin *= 2.0  # every rank saw the same largest displacement
-            if self.margin > self.max_displacement:
+            margin *= 2.0  # every rank saw the same largest displacement
+            self.margin = max(self.margin, margin)
+            if margin > self.max_displacement:
                 break
         self.n_minimisations += 1  # counted once: a run with a wider halo from the start is the same
         self.n_iterations += outcome.iterations
         self.max_iterations = max(self.max_iterations, outcome.iterations)
         return moving, problem, outcome
+
+    def _stopping_cells(self, moving, k):
+        """The cells the minimisation of the owned rows ``moving`` in ``k`` tiles per side stops
+        in one by one (:func:`parsim.core.ts.daha.minimise`): the cell of each moving row among
+        those of this process, how many it holds, and the cells held by several processes (in
+        the order of the grid, the same everywhere) as numbered here, -1 if not held here."""
+        cells = tiles_of(self.X, moving, self.L, stopping_cells_per_side(k, self.L, self.contact))
+        held = np.unique(cells)
+        everyone, holders = np.unique(self.domain.gather(held), return_counts=True)
+        shared = everyone[holders > 1]
+        here = np.searchsorted(held, shared)
+        found = here < held.size
+        found[found] = held[here[found]] == shared[found]
+        return np.searchsorted(held, cells), held.size, np.where(found, here, -1).astype(np.int64)
 
     def _memory_order(self, rows):
         """An order of the owned ``rows`` cell by cell on the contact grid (ties by global id), so
@@ -523,14 +549,15 @@ class _Run:
         cells = tiles_of(self.X, rows, self.L, self.grid_k)
         return np.argsort(cells * self.n + self.global_id[rows])  # one key: 10x faster than np.lexsort
 
-    def _problem(self, moving, anchors, drift):
+    def _problem(self, moving, anchors, drift, margin):
         """The minimisation of the owned rows ``moving`` with ``anchors`` fixed, the members of
-        other processes within the halo width as ghosts; and its exchange."""
+        other processes within the halo width (for spheres moving up to ``margin``) as ghosts; and
+        its exchange."""
         members = np.concatenate([moving, anchors])
-        width = self._problem_width(drift)
+        width = self._problem_width(drift, margin)
         if width > self.domain.max_halo_width:
             raise MinimiserFailure(f"the halo a minimisation needs ({width:g} wide: spheres moved {drift:g} earlier "
-                                   f"in the step, margin {self.margin:g}) is wider than the narrowest rank slab "
+                                   f"in the step, margin {margin:g}) is wider than the narrowest rank slab "
                                    f"({self.domain.max_halo_width:g}); run this task on fewer ranks")
         halo = self.domain.ghosts(self.X[members], self.global_id[members], width)
         is_moving = np.zeros(members.size)
@@ -539,7 +566,7 @@ class _Run:
                         global_id=halo.ghost_global_id, moving=halo.exchange(is_moving) > 0.5)
         problem = build_problem(self.X, self.R, moving, anchors, self.links, self.reach, self.local_of,
                                 global_id=self.global_id, ghosts=ghosts)
-        return problem, self.domain.problem_exchange(halo, problem.first_ghost, self.margin)
+        return problem, self.domain.problem_exchange(halo, problem.first_ghost, margin)
 
     def _carried_multipliers(self, problem):
         """Each candidate pair's multiplier at the end of its link's last minimisation (NaN if none)."""
