@@ -12,23 +12,29 @@ sediment first, then deposits the big one.  Rank 0 prints one row:
   ``--serial-seconds`` to the runs on more ranks;
 * ``settled twice``: descents beyond one per particle, over the particles (work thrown away);
 * ``rounds``, and per particle ``bytes`` sent to other ranks (footprints and committed spheres) and
-  ``messages`` (two all-to-alls and one reduction per round: ``2 (K - 1) + log2 K`` per rank);
+  ``messages`` (all ranks: per round two to each neighbour, and the reduction's);
 * ``MB/rank``: the largest peak resident memory of a rank during the deposition, above what it held
   before (its own particles' inputs included; the serial run holds all of them);
-* ``settle``: the share of the slowest rank's time spent settling particles; the rest is waiting
-  and communicating;
+* ``settle``: the share of the slowest rank's time spent settling particles (ahead of their turn
+  while waiting included); ``us/round``: that rank's microseconds per round outside settling
+  (packing, checking, inserting, and waiting when nothing is left to settle ahead);
 * ``survey``: the seconds every rank spends drawing and reading all the particles' inputs (to
   validate them, survey them and keep its own), included in ``seconds``: work that does not shrink
   with K.
 
-With ``--model``, rank 0 also measures the MPI latency and bandwidth of this machine (a ping-pong
-between ranks 0 and 1) and projects the speedup on ``K`` cores of one node from the counts:
-``T(K) = N t (1 + twice) / K + rounds (3 latency log2(2K) + python) + bytes / bandwidth``, with ``t``
-the serial seconds per particle and ``python`` the measured seconds per round outside the kernels.
+With ``--model``, rank 0 projects the time on as many cores of one node as the run has ranks, from
+the run's own counts: ``T(K) = N t (1 + twice) / K + rounds (overhead + (2 + log2 K) latency) +
+bytes / bandwidth + survey``, with ``t`` the serial seconds per particle, ``overhead`` the seconds
+per round outside settling, the latencies those of the two exchanges with the neighbours and of
+the reduction, ``bytes`` the most one rank sent.  Latency and bandwidth come from a ping-pong
+between ranks 0 and 1, or from ``--latency-us`` and ``--bandwidth-gbs``, and the overhead from the
+run or ``--overhead-us``: an oversubscribed run (its times mean nothing, its counts do) takes all
+three from a 2-rank run.
 
     mpiexec -n 1 python benchmarks/parallel_deposition.py --spheres 1000000
     mpiexec -n 2 python benchmarks/parallel_deposition.py --spheres 1000000 --serial-seconds S --model
-    mpiexec -n 8 python benchmarks/parallel_deposition.py --spheres 100000   # counts only (oversubscribed)
+    mpiexec -n 8 python benchmarks/parallel_deposition.py --spheres 1000000 --serial-seconds S --model \
+        --latency-us L --bandwidth-gbs B --overhead-us O   # oversubscribed: its counts, the 2-rank costs
 """
 
 import argparse
@@ -101,6 +107,11 @@ def main():
     parser.add_argument("--box", type=float, default=300.0)
     parser.add_argument("--serial-seconds", type=float, default=None)
     parser.add_argument("--model", action="store_true")
+    parser.add_argument("--latency-us", type=float, default=None,
+                        help="the model's latency (default: a ping-pong between ranks 0 and 1 of this run)")
+    parser.add_argument("--bandwidth-gbs", type=float, default=None, help="the model's bandwidth (default: ping-pong)")
+    parser.add_argument("--overhead-us", type=float, default=None,
+                        help="the model's cost of a round outside settling (default: this run's)")
     parser.add_argument("--window", type=int, default=None,
                         help="drop indices per rank in a round (default: deposit_streamed's)")
     parser.add_argument("--halo", type=float, default=None, help="halo in diameters (default: deposit_streamed's)")
@@ -125,32 +136,54 @@ def main():
         start = time.perf_counter()
         sdbd.deposit(*arguments)
         serial = time.perf_counter() - start
+    counts = Counts.of(tallies, options.spheres) if comm.rank == 0 else None
     if comm.rank == 0:
-        n = options.spheres
-        settles = sum(t["settles"] for t in tallies)
-        rounds = tallies[0]["rounds"]
-        sent = sum(t["halo_bytes"] + t["footprint_bytes"] for t in tallies)
-        messages = rounds * (2 * (ranks - 1) + math.ceil(math.log2(ranks))) * ranks if ranks > 1 else 0
-        slowest = max(tallies, key=lambda t: t["settle_seconds"])
         print(f"{'ranks':>5} {'spheres':>9} {'seconds':>8} {'serial s':>8} {'speedup':>7} {'settled twice':>13} "
-              f"{'rounds':>6} {'bytes/p':>7} {'msgs/p':>6} {'MB/rank':>7} {'settle':>6} {'survey':>6}")
-        print(f"{ranks:>5} {n:>9} {seconds:>8.2f} {serial if serial else float('nan'):>8.2f} "
-              f"{(serial / seconds) if serial else float('nan'):>7.2f} {settles / n - 1:>13.2e} {rounds:>6} "
-              f"{sent / n:>7.1f} {messages / n:>6.3f} {memory:>7.0f} {slowest['settle_seconds'] / seconds:>6.2f} "
-              f"{max(t['survey_seconds'] for t in tallies):>6.2f}",
+              f"{'rounds':>6} {'bytes/p':>7} {'msgs/p':>6} {'MB/rank':>7} {'settle':>6} {'us/round':>8} "
+              f"{'survey':>6}")
+        print(f"{ranks:>5} {options.spheres:>9} {seconds:>8.2f} {serial if serial else float('nan'):>8.2f} "
+              f"{(serial / seconds) if serial else float('nan'):>7.2f} {counts.twice:>13.2e} {counts.rounds:>6} "
+              f"{counts.bytes_sent / options.spheres:>7.1f} {counts.messages / options.spheres:>6.3f} {memory:>7.0f} "
+              f"{counts.settle_seconds / seconds:>6.2f} {counts.overhead * 1e6:>8.1f} {counts.survey:>6.2f}",
               flush=True)
-    if options.model and ranks >= 2:
-        latency, bandwidth = latency_and_bandwidth(comm)
+    if options.model:
+        measured = latency_and_bandwidth(comm) if ranks >= 2 and options.latency_us is None else (None, None)
         if comm.rank == 0:
-            t_particle = serial / n
-            python = (seconds - slowest["settle_seconds"]) / rounds
-            twice = settles / n - 1
-            print(f"latency {latency * 1e6:.1f} us, bandwidth {bandwidth / 1e9:.2f} GB/s, "
-                  f"{python * 1e3:.2f} ms per round outside the kernels")
-            for cores in (2, 4, 8, 16):
-                modelled = (n * t_particle * (1 + twice) / cores + rounds * (3 * latency * math.log2(2 * cores)
-                                                                            + python) + sent / bandwidth)
-                print(f"model: {cores:>2} cores, {modelled:8.2f} s, speedup {serial / modelled:5.2f}")
+            latency = options.latency_us * 1e-6 if options.latency_us is not None else measured[0]
+            bandwidth = options.bandwidth_gbs * 1e9 if options.bandwidth_gbs is not None else measured[1]
+            overhead = options.overhead_us * 1e-6 if options.overhead_us is not None else counts.overhead
+            modelled = counts.modelled(serial / options.spheres, ranks, latency, bandwidth, overhead)
+            print(f"model: {ranks} cores, latency {latency * 1e6:.1f} us, bandwidth {bandwidth / 1e9:.2f} GB/s, "
+                  f"{overhead * 1e6:.1f} us per round outside settling: {modelled:.2f} s, "
+                  f"speedup {serial / modelled:.2f}")
+
+
+class Counts:
+    """What a run of ``n`` particles counted, over its ranks: descents beyond one per particle (``twice``), rounds, bytes
+    and messages sent, the slowest rank's seconds settling and, per round, outside settling
+    (``overhead``), the largest bytes one rank sent, and the survey's seconds."""
+
+    def __init__(self, **values):
+        self.__dict__.update(values)
+
+    @classmethod
+    def of(cls, tallies, n):
+        slowest = max(tallies, key=lambda t: t["round_seconds"])
+        rounds = tallies[0]["rounds"]
+        return cls(n=n, twice=sum(t["settles"] for t in tallies) / n - 1, rounds=rounds,
+                   bytes_sent=sum(t["halo_bytes"] + t["footprint_bytes"] for t in tallies),
+                   most_bytes=max(t["halo_bytes"] + t["footprint_bytes"] for t in tallies),
+                   messages=sum(t["messages"] for t in tallies), settle_seconds=slowest["settle_seconds"],
+                   overhead=(slowest["round_seconds"] - slowest["settle_seconds"]) / max(rounds, 1),
+                   survey=max(t["survey_seconds"] for t in tallies))
+
+    def modelled(self, t_particle, cores, latency, bandwidth, overhead):
+        """Seconds on ``cores`` cores of one node: the particles' descents (this run's share settled
+        twice) evenly divided, each round's cost outside settling and its latencies (two exchanges
+        with the neighbours, a reduction over every rank), the most bytes a rank sends, the survey."""
+        per_round = overhead + (2 + math.ceil(math.log2(max(cores, 2)))) * latency
+        return (self.n * t_particle * (1 + self.twice) / cores + self.rounds * per_round
+                + self.most_bytes / bandwidth + self.survey)
 
 
 if __name__ == "__main__":

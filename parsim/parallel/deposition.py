@@ -619,7 +619,9 @@ class _RankRun:
                  "conflicts": int(counts[rounds.CONFLICTS]), "fetches": self.fetches,
                  "halo_particles": int(counts[rounds.HALO_PARTICLES]), "halo_bytes": int(counts[rounds.HALO_BYTES]),
                  "footprint_bytes": int(counts[rounds.FOOTPRINT_BYTES]),
+                 "round_seconds": float(counts[rounds.ROUND_SECONDS]),
                  "settle_seconds": float(counts[rounds.SETTLE_SECONDS]),
+                 "idle_seconds": float(counts[rounds.IDLE_SECONDS]),
                  "messages": int(link[kernel_mpi.LINK_MESSAGES]), "particles": int(np.count_nonzero(final)),
                  "chunk_steps": int(rows.chunks[kept].sum())}
         return DecomposedDeposition(rows.index[kept], self.prep.particle_shape[kept], self.prep.particle_scale[kept],

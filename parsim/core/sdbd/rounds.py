@@ -37,15 +37,16 @@ from parsim.core.sdbd.bundles import bundle, grid_arrays, new_grid, set_grid_arr
 from parsim.core.sdbd.engine import regrid
 
 __all__ = ["Plan", "run_rounds", "settle_again", "insert_parcel", "DONE", "LEFT_REGION", "STOPPED_AT_LIMIT",
-           "READ_CHANGED", "ROUNDS", "CONFLICTS", "SETTLE_SECONDS", "FOOTPRINT_BYTES", "HALO_BYTES", "HALO_PARTICLES",
+           "READ_CHANGED", "ROUNDS", "CONFLICTS", "ROUND_SECONDS", "SETTLE_SECONDS", "IDLE_SECONDS", "FOOTPRINT_BYTES", "HALO_BYTES", "HALO_PARTICLES",
            "N_TALLIES"]
 
 #: How a call of :func:`run_rounds` ends.
 DONE, LEFT_REGION, STOPPED_AT_LIMIT, READ_CHANGED = range(4)
-#: Entries of the tally (float64): rounds, conflicts, seconds settling, bytes of footprints and of
-#: committed particles sent, committed particles sent.
-ROUNDS, CONFLICTS, SETTLE_SECONDS, FOOTPRINT_BYTES, HALO_BYTES, HALO_PARTICLES = range(6)
-N_TALLIES = 6
+#: Entries of the tally (float64): rounds, conflicts, seconds in rounds and, of those, settling and
+#: waiting with nothing left to settle ahead, bytes of footprints and of committed particles sent,
+#: committed particles sent.
+ROUNDS, CONFLICTS, ROUND_SECONDS, SETTLE_SECONDS, IDLE_SECONDS, FOOTPRINT_BYTES, HALO_BYTES, HALO_PARTICLES = range(8)
+N_TALLIES = 8
 #: Message tags (the group's communicator carries nothing else point to point during the rounds).
 FOOTPRINT_TAG, COMMITTED_TAG = 41, 42
 #: Float64 per footprint sent (the particle and its box), per committed particle (its sphere count
@@ -88,7 +89,9 @@ def run_rounds(frontier, particles, settings, rows, plan, grid, centre, radius, 
                   np.empty(4096, dtype=np.int64))
     outcome = DONE
     while frontier < plan.n_particles:
+        started = kernel_mpi.now()
         outcome, frontier = _round(frontier, local, particles, settings, rows, plan, link, tally, settles, clock)
+        tally[ROUND_SECONDS] += kernel_mpi.now() - started
         if outcome != DONE:
             break
     return (outcome, frontier, local.grid.memory, local.centre, local.radius, local.key, local.n_used,
@@ -117,8 +120,9 @@ def _round(frontier, local, particles, settings, rows, plan, link, tally, settle
         if code >= 0:
             mine = code
     kernel_mpi.post_minimum(float(mine), link, REDUCTION_SLOT)
+    polled = kernel_mpi.now()
     while not kernel_mpi.is_done(link, REDUCTION_SLOT):
-        _settle_ahead(local, ahead_row, particles, settings, rows, plan, tally, settles)
+        polled = _settle_ahead(local, ahead_row, particles, settings, rows, plan, tally, settles, polled)
     new_frontier, reason = divmod(np.int64(kernel_mpi.reduced(link)), N_FAILURES)
     committed_row = np.searchsorted(rows.index, min(new_frontier, end))
     for o in range(first_row, committed_row):
@@ -165,12 +169,17 @@ def _settle_span(local, first_row, last_row, particles, settings, rows, plan, ta
 
 
 @jit
-def _settle_ahead(local, ahead_row, particles, settings, rows, plan, tally, settles):
+def _settle_ahead(local, ahead_row, particles, settings, rows, plan, tally, settles, since):
     """Settle the next row never settled, if it lies before ``ahead_row``: the next windows' work, done
-    while this rank waits for the others."""
+    while this rank waits for the others.  With nothing left to settle, the time since ``since`` (the
+    last poll) counts as idle.  Returns the time of this call's end."""
     row = local.settled_end
     if row < ahead_row:
         _settle_span(local, row, row + 1, particles, settings, rows, plan, tally, settles)
+        return kernel_mpi.now()
+    now = kernel_mpi.now()
+    tally[IDLE_SECONDS] += now - since
+    return now
 
 
 @jit
@@ -328,6 +337,7 @@ def _receive_all(local, tag, ahead_row, particles, settings, rows, plan, link, t
     pending = np.ones(n_neighbours, dtype=np.bool_)
     parts = np.empty(0)
     left = n_neighbours
+    polled = kernel_mpi.now()
     while left > 0:
         got = False
         for k in range(n_neighbours):
@@ -340,7 +350,7 @@ def _receive_all(local, tag, ahead_row, particles, settings, rows, plan, link, t
                     left -= 1
                     got = True
         if not got and left > 0:
-            _settle_ahead(local, ahead_row, particles, settings, rows, plan, tally, settles)
+            polled = _settle_ahead(local, ahead_row, particles, settings, rows, plan, tally, settles, polled)
     return parts
 
 

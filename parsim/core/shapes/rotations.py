@@ -28,7 +28,12 @@ def random_rotations(n, rng):
     b = np.sqrt(u[:, 0])
     t2 = 2.0 * np.pi * u[:, 1]
     t3 = 2.0 * np.pi * u[:, 2]
-    return np.stack([b * np.cos(t3), a * np.sin(t2), a * np.cos(t2), b * np.sin(t3)], axis=1)
+    q = np.empty((n, 4))  # filled column by column: no temporaries to stack
+    np.multiply(b, np.cos(t3), out=q[:, 0])
+    np.multiply(a, np.sin(t2), out=q[:, 1])
+    np.multiply(a, np.cos(t2), out=q[:, 2])
+    np.multiply(b, np.sin(t3), out=q[:, 3])
+    return q
 
 
 def rotate(offsets, quaternion):
