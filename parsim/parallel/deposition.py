@@ -430,8 +430,12 @@ class _RankRun:
         self.clock = np.full(1, np.nan)
 
     def _lay_substrate(self, own_spheres):
-        prep = self.prep
-        capacity = len(prep.substrate_radii) + own_spheres + 1024
+        """The substrate's spheres in the region join the empty local sediment, whose arrays have room for
+        them, the own spheres and those of the neighbours' particles in the halo (about as many, per
+        own sphere, as the halo's two strips are wide per block width), so that they seldom grow."""
+        prep, layout = self.prep, self.layout
+        halo_share = min(1.0, 2.0 * layout.halo * layout.n_blocks / layout.length) if layout.n_blocks > 1 else 0.0
+        capacity = len(prep.substrate_radii) + own_spheres + int(1.25 * halo_share * own_spheres) + 1024
         self.centre = np.zeros((capacity, 3))
         self.radius = np.zeros(capacity)
         self.key = np.full(capacity, -1, dtype=np.int64)
