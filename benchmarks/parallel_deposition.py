@@ -51,7 +51,7 @@ if __package__ in (None, ""):  # run as a script from a source tree
 
 from benchmarks.mpi_timing import latency_and_bandwidth  # noqa: E402
 from parsim.core import sdbd  # noqa: E402
-from parsim.core.shapes import random_rotations, sphere  # noqa: E402
+from parsim.core.shapes import DrawnRotations, sphere  # noqa: E402
 from parsim.parallel.deposition import deposit_streamed  # noqa: E402
 
 CHUNK = 1 << 20  # particles drawn at a time
@@ -64,7 +64,7 @@ def particle_chunks(n, box, seed=1):
         rotation_rng, drop_rng = np.random.default_rng(seed).spawn(2)
         for first in range(0, n, CHUNK):
             count = min(CHUNK, n - first)
-            yield (np.zeros(count, dtype=np.int64), np.ones(count), random_rotations(count, rotation_rng),
+            yield (np.zeros(count, dtype=np.int64), np.ones(count), DrawnRotations.draw(count, rotation_rng),
                    drop_rng.random((count, 2)) * box)
 
     return chunks

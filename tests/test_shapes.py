@@ -15,6 +15,7 @@ from parsim.core.shapes import (
     ellipsoid,
     extent_below_com,
     four_rods,
+    DrawnRotations,
     random_rotations,
     rod,
     rotate,
@@ -360,6 +361,21 @@ def test_random_rotations_are_unit_and_uniform():
         assert np.all(np.abs(hist / n - 0.1) < 5 * math.sqrt(0.09 / n))
     # reproducible from the seed
     assert np.array_equal(random_rotations(5, np.random.default_rng(1)), random_rotations(5, np.random.default_rng(1)))
+
+
+def test_drawn_rotations_are_the_random_rotations_row_by_row():
+    """A rank of a spread deposition computes the orientations of its own particles only: any rows
+    taken from the drawn uniforms are bitwise those rows of random_rotations, and the generator goes
+    on from the same place."""
+    n = 1001
+    rng, drawn_rng = np.random.default_rng(7), np.random.default_rng(7)
+    whole = random_rotations(n, rng)
+    drawn = DrawnRotations.draw(n, drawn_rng)
+    rows = np.flatnonzero(np.random.default_rng(3).random(n) < 0.3)
+    assert len(drawn) == n and drawn.shape == (n, 4)
+    assert np.array_equal(drawn[rows], whole[rows]) and np.array_equal(drawn[5], whole[5:6])
+    assert np.array_equal(np.asarray(drawn), whole) and drawn[rows[:0]].shape == (0, 4)
+    assert rng.random() == drawn_rng.random()
 
 
 def test_rotate_matches_axis_angle_and_preserves_distances():

@@ -310,7 +310,7 @@ class _Survey:
         first = 0
         for shape, scale, rotation, drop_xy in self.particle_chunks():
             chunk = sdbd.prepare_deposition(*self.shapes, shape, scale, rotation, drop_xy, *self.container,
-                                            **self.settings, first_particle=first)
+                                            **self.settings, first_particle=first, keep_drawn_rotations=True)
             yield chunk
             first += len(chunk.particle_shape)
 

@@ -512,7 +512,7 @@ def _particle_chunks(params, species, geometry, rng, chunk):
         draws = ParticleDraws(params, species, species_stream, size_stream)
         for first in range(0, n, chunk):
             drops = draws.draw(min(chunk, n - first))
-            yield (drops, shape_library.random_rotations(len(drops.scale), rotation_stream),
+            yield (drops, shape_library.DrawnRotations.draw(len(drops.scale), rotation_stream),
                    _drop_positions(params, geometry, species, drops, drop_stream))
 
     return chunks

@@ -114,6 +114,7 @@ from parsim.core.sdbd.constants import (
     WALL_FRICTIONLESS,
     WALL_GLUED,
 )
+from parsim.core.shapes.rotations import DrawnRotations
 from parsim.core.ticker import ticking
 
 __all__ = [
@@ -394,17 +395,20 @@ def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, 
                        particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
                        trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
                        wall_contact=WALL_FRICTIONLESS, container=CONTAINER_BOX, cylinder=None,
-                       substrate_positions=None, substrate_radii=None, first_particle=0):
+                       substrate_positions=None, substrate_radii=None, first_particle=0, keep_drawn_rotations=False):
     """The arguments of :func:`deposit` validated (a ValueError names the first bad one) as a
     :class:`PreparedDeposition`; ``first_particle`` is the first particle's place in the drop order
-    when these are a chunk of a longer run (the errors name particles by it)."""
+    when these are a chunk of a longer run (the errors name particles by it).  With
+    ``keep_drawn_rotations``, ``particle_rotation`` given as :class:`~parsim.core.shapes.rotations.DrawnRotations`
+    (unit quaternions by construction) stays one, its rows computed only when taken."""
 
     offsets = np.ascontiguousarray(shape_offsets, dtype=np.float64)
     radii = np.ascontiguousarray(shape_radii, dtype=np.float64)
     start = np.ascontiguousarray(shape_start, dtype=np.int64)
     pshape = np.ascontiguousarray(particle_shape, dtype=np.int64)
     pscale = np.ascontiguousarray(particle_scale, dtype=np.float64)
-    prot = np.ascontiguousarray(particle_rotation, dtype=np.float64)  # read, not written
+    drawn = keep_drawn_rotations and isinstance(particle_rotation, DrawnRotations)
+    prot = particle_rotation if drawn else np.ascontiguousarray(particle_rotation, dtype=np.float64)  # read only
     pxy = np.ascontiguousarray(particle_drop_xy, dtype=np.float64)
     lo = np.asarray(box_lower_xy, dtype=np.float64)
     hi = np.asarray(box_upper_xy, dtype=np.float64)
@@ -424,9 +428,9 @@ def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, 
         raise ValueError(f"particle_shape must be a 1-d array of shape indices in [0, {n_shapes})")
     if pscale.shape != (P,) or not np.all(np.isfinite(pscale)) or np.any(pscale <= 0):
         raise ValueError(f"particle_scale must have shape ({P},) with finite values > 0")
-    if prot.shape != (P, 4) or not np.all(np.isfinite(prot)):
+    if prot.shape != (P, 4) or not (drawn or np.all(np.isfinite(prot))):
         raise ValueError(f"particle_rotation must have shape ({P}, 4) with finite values")
-    if np.any(np.linalg.norm(prot, axis=1) < 1e-12):  # the kernel normalises them
+    if not drawn and np.any(np.linalg.norm(prot, axis=1) < 1e-12):  # the kernel normalises them
         raise ValueError("particle_rotation must hold non-zero quaternions")
     if pxy.shape != (P, 2) or not np.all(np.isfinite(pxy)):
         raise ValueError(f"particle_drop_xy must have shape ({P}, 2) with finite values")
@@ -469,8 +473,8 @@ def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, 
     r_sub = float(np.max(sub_rad)) if len(sub_rad) else 0.0
     if lateral == LATERAL_WALLS and P:
         # the caller guarantees that each particle starts inside; check it
-        outside = _first_outside_walls(offsets, radii, start, pshape, pscale, prot, pxy, lo, hi, polygon, n_sides,
-                                       1e-9 * ell)
+        outside = _first_outside_walls(offsets, radii, start, pshape, pscale, np.asarray(prot), pxy, lo, hi, polygon,
+                                       n_sides, 1e-9 * ell)
         if outside >= 0:
             raise ValueError(f"particle {first_particle + outside}: dropped at {tuple(pxy[outside].tolist())}, it "
                              "does not fit inside the walls")

@@ -47,7 +47,8 @@ Modules, one job each:
 - :mod:`.smooth`: :func:`ellipsoid` and :func:`superellipsoid`, built by the greedy cover of
   :mod:`.medial_balls` with the point-to-surface distances of :mod:`.ellipsoid_distance`
   (exact) and :mod:`.superellipsoid_distance` (local searches);
-- :mod:`.rotations`: :func:`random_rotations`, :func:`rotate`;
+- :mod:`.rotations`: :func:`random_rotations` (and :class:`DrawnRotations`, computed row by row when taken),
+  :func:`rotate`;
 - :mod:`.extents`: :func:`extent_below_com`, :func:`bounding_radius`;
 - :mod:`.checks`: the argument checks they share.
 
@@ -57,7 +58,7 @@ recompiles its callers.
 """
 
 from parsim.core.shapes.extents import bounding_radius, extent_below_com
-from parsim.core.shapes.rotations import random_rotations, rotate
+from parsim.core.shapes.rotations import DrawnRotations, random_rotations, rotate
 from parsim.core.shapes.simple import agglomerate, cube, four_rods, rod, sphere, spiky, tripod
 from parsim.core.shapes.smooth import ellipsoid, superellipsoid
 from parsim.core.shapes.union import DEFAULT_UNION_RESOLUTION, centre_of_mass_of_union
@@ -77,5 +78,6 @@ __all__ = [
     "extent_below_com",
     "bounding_radius",
     "random_rotations",
+    "DrawnRotations",
     "rotate",
 ]

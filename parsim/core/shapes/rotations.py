@@ -20,15 +20,48 @@ def random_rotations(n, rng):
     sqrt(1-u1) cos 2pi u2, sqrt(u1) sin 2pi u3)`` is uniform on the unit 3-sphere, hence the
     rotation is uniform (Haar) on SO(3).  Uses ``rng.random((n, 3))`` only.
     """
-    n = _check_int("n", n, 0)
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-    u = rng.random((n, 3))
+    return np.asarray(DrawnRotations.draw(n, rng))
+
+
+class DrawnRotations:
+    """:func:`random_rotations` drawn but not yet computed: the uniforms are drawn at once (the
+    generator's stream goes on as for :func:`random_rotations`), the quaternions of the rows asked
+    for only when asked: ``rotations[rows]`` gives those rows of :func:`random_rotations`, bit for
+    bit, and ``numpy.asarray(rotations)`` all of them.  A rank of a deposition spread over ranks
+    draws every particle's orientation, to keep the stream, and computes only its own."""
+
+    def __init__(self, uniforms):
+        self.uniforms = uniforms
+
+    @classmethod
+    def draw(cls, n, rng) -> "DrawnRotations":
+        n = _check_int("n", n, 0)
+        if not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        return cls(rng.random((n, 3)))
+
+    def __len__(self):
+        return len(self.uniforms)
+
+    @property
+    def shape(self):
+        return (len(self.uniforms), 4)
+
+    def __getitem__(self, rows) -> np.ndarray:
+        return _shoemake(np.atleast_2d(self.uniforms[rows]))
+
+    def __array__(self, dtype=None, copy=None):
+        quaternions = _shoemake(self.uniforms)
+        return quaternions if dtype is None else quaternions.astype(dtype, copy=False)
+
+
+def _shoemake(u):
+    """The unit quaternions of Shoemake's method for the rows of uniforms ``u`` (k, 3)."""
     a = np.sqrt(1.0 - u[:, 0])
     b = np.sqrt(u[:, 0])
     t2 = 2.0 * np.pi * u[:, 1]
     t3 = 2.0 * np.pi * u[:, 2]
-    q = np.empty((n, 4))  # filled column by column: no temporaries to stack
+    q = np.empty((len(u), 4))  # filled column by column: no temporaries to stack
     np.multiply(b, np.cos(t3), out=q[:, 0])
     np.multiply(a, np.sin(t2), out=q[:, 1])
     np.multiply(a, np.cos(t2), out=q[:, 2])
