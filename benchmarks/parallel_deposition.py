@@ -28,13 +28,14 @@ bytes / bandwidth + survey``, with ``t`` the serial seconds per particle, ``over
 per round outside settling, the latencies those of the two exchanges with the neighbours and of
 the reduction, ``bytes`` the most one rank sent.  Latency and bandwidth come from a ping-pong
 between ranks 0 and 1, or from ``--latency-us`` and ``--bandwidth-gbs``, and the overhead from the
-run or ``--overhead-us``: an oversubscribed run (its times mean nothing, its counts do) takes all
-three from a 2-rank run.
+run or ``--overhead-us``, the survey from the run or ``--survey-seconds``: an oversubscribed run (its
+times mean nothing, its counts do) takes all four from a 2-rank run of the same sediment.
 
     mpiexec -n 1 python benchmarks/parallel_deposition.py --spheres 1000000
     mpiexec -n 2 python benchmarks/parallel_deposition.py --spheres 1000000 --serial-seconds S --model
     mpiexec -n 8 python benchmarks/parallel_deposition.py --spheres 1000000 --serial-seconds S --model \
-        --latency-us L --bandwidth-gbs B --overhead-us O   # oversubscribed: its counts, the 2-rank costs
+        --latency-us L --bandwidth-gbs B --overhead-us O --survey-seconds S2   # oversubscribed: its counts,
+                                                                                # the 2-rank costs
 """
 
 import argparse
@@ -58,21 +59,22 @@ CHUNK = 1 << 20  # particles drawn at a time
 
 
 def particle_chunks(n, box, seed=1):
-    """A function yielding the particles' inputs in chunks, from the first particle at every call."""
+    """A function yielding the particles' inputs in chunks, from the first particle at every call (``box``: the
+    side of a square, or the (x, y) sides)."""
 
     def chunks():
         rotation_rng, drop_rng = np.random.default_rng(seed).spawn(2)
         for first in range(0, n, CHUNK):
             count = min(CHUNK, n - first)
             yield (np.zeros(count, dtype=np.int64), np.ones(count), DrawnRotations.draw(count, rotation_rng),
-                   drop_rng.random((count, 2)) * box)
+                   drop_rng.random((count, 2)) * np.broadcast_to(box, 2))
 
     return chunks
 
 
 def shapes_and_box(box):
     offsets, radii = sphere()
-    return (0.5 * offsets, 0.5 * radii, np.array([0, 1])), ((0.0, 0.0), (box, box), sdbd.LATERAL_PERIODIC,
+    return (0.5 * offsets, 0.5 * radii, np.array([0, 1])), ((0.0, 0.0), tuple(np.broadcast_to(box, 2)), sdbd.LATERAL_PERIODIC,
                                                              sdbd.FLOOR_ROLL)
 
 
@@ -105,6 +107,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--spheres", type=int, default=1_000_000)
     parser.add_argument("--box", type=float, default=300.0)
+    parser.add_argument("--width", type=float, default=None,
+                        help="the box's side along x, across the blocks (default: --box)")
     parser.add_argument("--serial-seconds", type=float, default=None)
     parser.add_argument("--model", action="store_true")
     parser.add_argument("--latency-us", type=float, default=None,
@@ -112,6 +116,8 @@ def main():
     parser.add_argument("--bandwidth-gbs", type=float, default=None, help="the model's bandwidth (default: ping-pong)")
     parser.add_argument("--overhead-us", type=float, default=None,
                         help="the model's cost of a round outside settling (default: this run's)")
+    parser.add_argument("--survey-seconds", type=float, default=None,
+                        help="the model's survey seconds (default: this run's)")
     parser.add_argument("--window", type=int, default=None,
                         help="drop indices per rank in a round (default: deposit_streamed's)")
     parser.add_argument("--halo", type=float, default=None, help="halo in diameters (default: deposit_streamed's)")
@@ -124,7 +130,8 @@ def main():
     before = status_mb("VmRSS")
     start = time.perf_counter()
     tuning = {"window_per_rank": options.window, "halo": options.halo}
-    share = deposit_spread(comm, options.spheres, options.box,
+    box = (options.width or options.box, options.box)
+    share = deposit_spread(comm, options.spheres, box,
                            **{key: value for key, value in tuning.items() if value is not None})
     seconds = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     memory = comm.allreduce(status_mb("VmHWM") - before, op=MPI.MAX)
@@ -132,7 +139,7 @@ def main():
     serial = options.serial_seconds
     if ranks == 1 and serial is None:
         sdbd.deposit(*serial_inputs(2000, 40.0, seed=2))  # compile
-        arguments = serial_inputs(options.spheres, options.box)
+        arguments = serial_inputs(options.spheres, box)
         start = time.perf_counter()
         sdbd.deposit(*arguments)
         serial = time.perf_counter() - start
@@ -152,9 +159,10 @@ def main():
             latency = options.latency_us * 1e-6 if options.latency_us is not None else measured[0]
             bandwidth = options.bandwidth_gbs * 1e9 if options.bandwidth_gbs is not None else measured[1]
             overhead = options.overhead_us * 1e-6 if options.overhead_us is not None else counts.overhead
-            modelled = counts.modelled(serial / options.spheres, ranks, latency, bandwidth, overhead)
+            survey = options.survey_seconds if options.survey_seconds is not None else counts.survey
+            modelled = counts.modelled(serial / options.spheres, ranks, latency, bandwidth, overhead, survey)
             print(f"model: {ranks} cores, latency {latency * 1e6:.1f} us, bandwidth {bandwidth / 1e9:.2f} GB/s, "
-                  f"{overhead * 1e6:.1f} us per round outside settling: {modelled:.2f} s, "
+                  f"{overhead * 1e6:.1f} us per round outside settling, survey {survey:.2f} s: {modelled:.2f} s, "
                   f"speedup {serial / modelled:.2f}")
 
 
@@ -177,13 +185,13 @@ class Counts:
                    overhead=(slowest["round_seconds"] - slowest["settle_seconds"]) / max(rounds, 1),
                    survey=max(t["survey_seconds"] for t in tallies))
 
-    def modelled(self, t_particle, cores, latency, bandwidth, overhead):
+    def modelled(self, t_particle, cores, latency, bandwidth, overhead, survey):
         """Seconds on ``cores`` cores of one node: the particles' descents (this run's share settled
         twice) evenly divided, each round's cost outside settling and its latencies (two exchanges
         with the neighbours, a reduction over every rank), the most bytes a rank sends, the survey."""
         per_round = overhead + (2 + math.ceil(math.log2(max(cores, 2)))) * latency
         return (self.n * t_particle * (1 + self.twice) / cores + self.rounds * per_round
-                + self.most_bytes / bandwidth + self.survey)
+                + self.most_bytes / bandwidth + survey)
 
 
 if __name__ == "__main__":

@@ -8,7 +8,8 @@ go through it in rounds, each over a window of drop indices starting at the *fro
 particle before it is committed, on every rank):
 
 1. each rank settles its absent particles of the window in drop order;
-2. each sends the footprints of its window's particles to the ranks whose region they meet;
+2. each sends the footprints of its window's particles to the neighbours (the ranks whose region
+   meets its own) whose region they meet;
 3. each finds its first particle that cannot be committed once all before it are
    (:func:`parsim.core.sdbd.blocks.first_failure`): its rectangle leaves the region, or a particle
    of another rank dropped between the frontier and it has a sphere in its rectangle, or it stopped
@@ -17,8 +18,13 @@ particle before it is committed, on every rank):
    frontier and so exact; one whose rectangle left the region is settled again at once on the
    committed spheres its owner fetches from every rank, until its rectangle stays in what its
    owner holds;
-5. each rank sends its newly committed particles to the ranks whose region holds one of their
+5. each rank sends its newly committed particles to the neighbours whose region holds one of their
    sphere centres, and inserts those it receives; they withdraw the present particles they touch.
+
+The rounds run inside one jitted loop per rank (:func:`parsim.core.sdbd.rounds.run_rounds`), which
+calls the MPI library itself; while it waits for a message or the reduction it settles the next
+windows' particles instead of idling.  It returns to Python only for a particle that left its
+region (step 4: fetched here, from every rank) and at the end.
 
 What a rank holds: the inputs of its own particles alone (:func:`deposit_streamed` reads the
 particles in chunks, validates them, surveys what the decomposition needs of all and keeps its own;
@@ -53,12 +59,11 @@ from parsim.parallel.halo import kernel_link
 __all__ = ["BlockLayout", "CellGrowth", "deposit_decomposed", "deposit_streamed", "DecomposedDeposition",
            "DecompositionError", "InvalidDeposition", "default_halo", "drop_order", "spans"]
 
-#: particles per rank in a round's window of drop indices, on a block of REFERENCE_COLUMNS grid columns;
-#: a smaller block takes a window smaller by the square root of its area (default_window)
-WINDOW_PER_RANK = 512
-REFERENCE_COLUMNS = 45_000  # a block of 150 x 300 sphere diameters
-SMALLEST_WINDOW = 64
-
+#: drop indices of a round, all ranks together, in a box of REFERENCE_SIDE x REFERENCE_SIDE grid columns cut
+#: into two blocks; other boxes and other numbers of blocks scale it (default_window)
+REFERENCE_WINDOW = 1024
+REFERENCE_SIDE = 300.0
+SMALLEST_WINDOW, LARGEST_WINDOW = 16, 2048  # per rank
 
 class InvalidDeposition(JobError, ValueError):
     """An argument of :func:`deposit_decomposed` that :func:`parsim.core.sdbd.deposit` would refuse too
@@ -84,18 +89,23 @@ def default_halo(prep, largest_scale, largest_cell) -> float:
 
 
 def default_window(layout, prep, cell) -> int:
-    """Drop indices per rank in a round: WINDOW_PER_RANK on a block of REFERENCE_COLUMNS columns of side
-    ``cell``, fewer by the square root of a smaller block's area, a power of two, at least SMALLEST_WINDOW.
-    More particles dropped at once on a small block conflict more often: on 2 ranks and 10^6 spheres,
-    128 was the fastest of 64-512 in a box of 100 x 100 diameters (7.2 s against 8.4 s with 512),
-    256 in one of 200 x 200 and 512 in one of 300 x 300 (docs/benchmarks.md)."""
-    width = layout.length / layout.n_blocks
+    """Drop indices per rank in a round.  A round commits the particles up to the first one that conflicts
+    across a block border.  With particles dropped uniformly, a particle of the window conflicts with a
+    chance that grows with the number of borders and with the particles dropped before it in the window,
+    so the first conflict comes after about ``X sqrt(D / K)`` particles (``X`` the box's width across the
+    blocks and ``D`` its depth, in grid columns; ``K`` blocks); a longer window only settles particles
+    that will be settled again.  The window, in drop order, is REFERENCE_WINDOW scaled so, per rank the
+    nearest power of two between SMALLEST_WINDOW and LARGEST_WINDOW: 512 in a box of 300 x 300 sphere
+    diameters on 2 ranks, 32 on 16.  Measured (docs/benchmarks.md): on 2 ranks and 10^6 spheres, 128 was
+    the fastest of 64-512 in a box of 100 x 100 diameters, 256 in one of 200 x 200 and 512 in one of
+    300 x 300; a block 18.75 diameters wide, as on 16 ranks, settles 3.4 % of its particles twice with
+    128, 0.9 % with 32."""
     depth = float(prep.box_upper_xy[1] - prep.box_lower_xy[1]) if prep.lateral != LATERAL_NONE \
         else layout.length  # a heap: about as deep as its drop area is wide
-    columns = max(width * depth / cell**2, 1.0)
-    window = WINDOW_PER_RANK * min(1.0, math.sqrt(columns / REFERENCE_COLUMNS))
-    return max(SMALLEST_WINDOW, 1 << int(math.floor(math.log2(max(window, 1.0)))))
-
+    width, depth = layout.length / cell / REFERENCE_SIDE, max(depth / cell / REFERENCE_SIDE, 0.0)
+    window = REFERENCE_WINDOW * width * math.sqrt(depth * 2.0 / layout.n_blocks)
+    per_rank = math.floor(math.log2(max(window / layout.n_blocks, 1.0)) + 0.5)
+    return int(min(max(1 << per_rank, SMALLEST_WINDOW), LARGEST_WINDOW))
 
 class CellGrowth:
     """The grid's cell after each particle's arrival (the largest sphere diameter so far, at least the

@@ -54,6 +54,8 @@ FOOTPRINT_TAG, COMMITTED_TAG = 41, 42
 FOOTPRINT_WIDTH, PARTICLE_WIDTH, SPHERE_WIDTH = 5, 5, 5
 #: Slot of the reduction's request; the sends' take the slots after it.
 REDUCTION_SLOT = 0
+#: Seconds of settling ahead between two looks at the messages (a look costs about a microsecond).
+POLL_SECONDS = 25e-6
 
 #: What the rounds of one rank need to know besides its rows: the number of particles, the window
 #: (drop indices per round), the growth of the grid's cell (``growth_at``: the particles from which
@@ -170,15 +172,18 @@ def _settle_span(local, first_row, last_row, particles, settings, rows, plan, ta
 
 @jit
 def _settle_ahead(local, ahead_row, particles, settings, rows, plan, tally, settles, since):
-    """Settle the next row never settled, if it lies before ``ahead_row``: the next windows' work, done
-    while this rank waits for the others.  With nothing left to settle, the time since ``since`` (the
-    last poll) counts as idle.  Returns the time of this call's end."""
-    row = local.settled_end
-    if row < ahead_row:
-        _settle_span(local, row, row + 1, particles, settings, rows, plan, tally, settles)
-        return kernel_mpi.now()
+    """Settle the next rows never settled, before ``ahead_row``, until POLL_SECONDS have passed since
+    ``since`` (the last look at the messages): the next windows' work, done while this rank waits
+    for the others.  With nothing left to settle, the time since ``since`` counts as idle.  Returns
+    the time of this call's end."""
     now = kernel_mpi.now()
-    tally[IDLE_SECONDS] += now - since
+    if local.settled_end >= ahead_row:
+        tally[IDLE_SECONDS] += now - since
+        return now
+    while local.settled_end < ahead_row and now - since < POLL_SECONDS:
+        row = local.settled_end
+        _settle_span(local, row, row + 1, particles, settings, rows, plan, tally, settles)
+        now = kernel_mpi.now()
     return now
 
 
