@@ -449,7 +449,7 @@ class _Run:
         """One minimisation (step 2c) of the clusters joined by the links ``made`` in this time
         step, in the tiles holding an end of the ``latest`` of them; returns the owned rows that
         moved.  ``drift``: how far spheres moved earlier in this time step."""
-        involved = involved_spheres(self.cluster, self.n_clusters, made)
+        involved = involved_spheres(self.cluster, self.n_clusters, made, self.own_cluster)  # owned rows
         tilings = self._tilings(involved, first_round=latest.shape[0] == made.shape[0])
         for k in tilings:
             cap = self.daha.max_iterations if k == tilings[-1] else min(self.daha.max_iterations, TILED_ITERATIONS)
@@ -493,21 +493,21 @@ class _Run:
         if self.tiles:
             tilings = [self.tiles]
         else:
-            n_interacting = int(involved.sum())
+            n_interacting = int(self.domain.sum(float(involved.sum())))
             law = tiles_per_side(n_interacting, self.d, self.L, self.min_tile)
             fine = later_round_tiles_per_side(n_interacting, self.d, self.L, self.min_tile)
             tilings = [law] if first_round or fine == law else [fine, law]
         return tilings if tilings[-1] == 1 else tilings + [1]
 
     def _solve(self, involved, latest, k, drift, daha):
-        """DAHA (parameters ``daha``) on the ``involved`` spheres in the tiles (``k`` per side)
+        """DAHA (parameters ``daha``) on the ``involved`` owned rows (a mask) in the tiles (``k`` per side)
         holding an end of a ``latest`` link, the surrounding tiles' as anchors:
         ``(moving, problem, outcome)``.
         A sphere leaving the halo doubles the margin (:meth:`_first_margin`) and starts again.  A failed attempt in
         some tiles counts as a minimisation of its own."""
         seeds = np.flatnonzero(np.isin(self.global_id, latest.reshape(-1)))
         active = np.unique(self.domain.gather(tiles_of(self.X, seeds, self.L, k)))
-        moving, anchors = select_spheres(self.X, involved[self.global_id], active, self.L, k)
+        moving, anchors = select_spheres(self.X, involved, active, self.L, k)
         moving = moving[self._memory_order(moving)]
         cell_of, n_cells, shared_cells = self._stopping_cells(moving, k)
         margin = self._first_margin(drift)
