@@ -567,7 +567,7 @@ class _Run:
                         global_id=halo.ghost_global_id, moving=halo.exchange(is_moving) > 0.5)
         problem = build_problem(self.X, self.R, moving, anchors, self.links, self.reach, self.local_of,
                                 global_id=self.global_id, ghosts=ghosts)
-        return problem, self.domain.problem_exchange(halo, problem.first_ghost, margin)
+        return problem, self.domain.problem_exchange(halo, margin)
 
     def _carried_multipliers(self, problem):
         """Each candidate pair's multiplier at the end of its link's last minimisation (NaN if none)."""
