@@ -18,7 +18,7 @@ is given a :class:`DecomposedDomain` (the interface is in :mod:`parsim.core.ts.d
   :class:`parsim.parallel.halo.HaloPlan` s; in a minimisation every DAHA iteration sends each
   neighbour, in one message from inside the jitted loop (:mod:`parsim.core.kernel_mpi`), the
   ghost rows that moved (position, velocity, damping), and reduces the stopping tests; what runs in Python
-  (pair searches) exchanges through :class:`_ProblemExchange`;
+  (the halo test before a pair search) reduces through :class:`_ProblemExchange`;
 - the radii, masses, cluster labels and links are known on every rank: new links are
   gathered on all ranks each time step (a few per sphere over a whole run), so the cluster
   relabelling is the same deterministic union-find everywhere, and each merged cluster's
@@ -102,25 +102,13 @@ class _MeteredHalo:
 class _ProblemExchange:
     """DAHA's exchange (:class:`parsim.core.ts.daha.SerialExchange`) over a halo plan."""
 
-    def __init__(self, halo: _MeteredHalo, domain: "DecomposedDomain", first_ghost: int, margin: float):
-        self.halo = halo
+    def __init__(self, halo: _MeteredHalo, domain: "DecomposedDomain", margin: float):
         self.domain = domain
-        self.first_ghost = first_ghost
         self.margin = margin
-        self.active = domain.size > 1
-        if self.active:
+        if domain.size > 1:
             self.kernel_halo = halo.plan.kernel_halo(motion_width(domain.dimension), domain.traffic.kernel)
         else:
             self.kernel_halo = kernel_mpi.no_halo()
-
-    def share(self, values):
-        if not self.active:
-            return
-        owned = values[: self.first_ghost]
-        if values.dtype == np.bool_:
-            values[self.first_ghost:] = self.halo.exchange(owned.astype(np.float64)) > 0.5
-        else:
-            values[self.first_ghost:] = self.halo.exchange(owned)
 
     def sum(self, value):
         return self.domain.sum(value)
@@ -164,8 +152,11 @@ class DecomposedDomain:
         if self.size > 1 and decomposition.imbalance(X.shape[0]) > REBALANCE_ABOVE:
             decomposition.set_tile_splits(decomposition.balanced_splits(decomposition.tile_counts(X)))
         started = time.perf_counter()
-        leaving = int(np.count_nonzero(decomposition.owner_of(X) != decomposition.rank)) if self.size > 1 else 0
-        global_id, arrays = migrate(decomposition, global_id, {"position": X, "velocity": V})
+        owner, leaving = None, 0
+        if self.size > 1:
+            owner = decomposition.owner_of(X)
+            leaving = int(np.count_nonzero(owner != decomposition.rank))
+        global_id, arrays = migrate(decomposition, global_id, {"position": X, "velocity": V}, owner)
         self.traffic.add("migration", leaving * 8 * (1 + 2 * self.dimension), started)
         return global_id, arrays["position"], arrays["velocity"]
 
@@ -179,8 +170,8 @@ class DecomposedDomain:
     def ghosts(self, X, global_id, width):
         return _MeteredHalo(HaloPlan(self.decomposition, X, width, global_id), self.traffic)
 
-    def problem_exchange(self, halo, first_ghost, margin):
-        return _ProblemExchange(halo, self, first_ghost, margin if self.size > 1 else math.inf)
+    def problem_exchange(self, halo, margin):
+        return _ProblemExchange(halo, self, margin if self.size > 1 else math.inf)
 
     def _reduce(self, value, op):
         started = time.perf_counter()

@@ -121,14 +121,22 @@ def _root(parent, c):
 
 
 @jit
-def merge_clusters(cluster, n_clusters, pairs):
-    """Labels after joining the clusters of each linked pair; returns ``(labels, M)``."""
+def _joined(cluster, n_clusters, pairs):
+    """Union-find over the cluster labels after joining the clusters of each pair: the parent of
+    each label (:func:`_root` gives its joined cluster's root, the least label in it)."""
     parent = np.arange(n_clusters)
     for p in range(pairs.shape[0]):
         a = _root(parent, cluster[pairs[p, 0]])
         b = _root(parent, cluster[pairs[p, 1]])
         if a != b:
             parent[max(a, b)] = min(a, b)
+    return parent
+
+
+@jit
+def merge_clusters(cluster, n_clusters, pairs):
+    """Labels after joining the clusters of each linked pair; returns ``(labels, M)``."""
+    parent = _joined(cluster, n_clusters, pairs)
     new_label = np.full(n_clusters, -1, dtype=np.int64)
     labels = np.empty_like(cluster)
     m = 0
@@ -142,15 +150,17 @@ def merge_clusters(cluster, n_clusters, pairs):
 
 
 @jit
-def involved_spheres(cluster, n_clusters, pairs):
-    """Mask of the spheres whose cluster will be joined by one of ``pairs``."""
-    labels, _ = merge_clusters(cluster, n_clusters, pairs)
-    touched = np.zeros(cluster.shape[0], dtype=np.bool_)
-    hit = np.zeros(cluster.shape[0], dtype=np.bool_)  # by new label
+def involved_spheres(cluster, n_clusters, pairs, own_cluster):
+    """Mask of the spheres of labels ``own_cluster`` (those a process owns) whose cluster will be
+    joined by one of ``pairs``; ``cluster`` labels all spheres.  It reads the owned spheres
+    alone: a process's share of the run, not every sphere on every process."""
+    parent = _joined(cluster, n_clusters, pairs)
+    hit = np.zeros(n_clusters, dtype=np.bool_)  # by root
     for p in range(pairs.shape[0]):
-        hit[labels[pairs[p, 0]]] = True
-    for i in range(cluster.shape[0]):
-        touched[i] = hit[labels[i]]
+        hit[_root(parent, cluster[pairs[p, 0]])] = True
+    touched = np.empty(own_cluster.shape[0], dtype=np.bool_)
+    for i in range(own_cluster.shape[0]):
+        touched[i] = hit[_root(parent, own_cluster[i])]
     return touched
 
 

@@ -14,7 +14,7 @@ Members:
 - ``ghosts(X, global_id, width)``: a halo of the spheres of other processes within ``width``
   of this one's sub-box: ``n_ghost``, ``ghost_global_id`` and ``exchange(values)`` (the
   ghosts' rows of per-owned-sphere ``values``); ``max_halo_width`` bounds ``width``;
-- ``problem_exchange(halo, first_ghost, margin)``: the minimiser's exchange (:class:`SerialExchange`),
+- ``problem_exchange(halo, margin)``: the minimiser's exchange (:class:`SerialExchange`),
   which stops a minimisation when a sphere moves farther than ``margin``;
 - ``sum``, ``max``, ``min`` of a float, ``sum_array`` elementwise, ``gather(rows)`` the
   concatenation of every process's rows in rank order, ``imbalance(work)`` max / mean;
@@ -54,7 +54,7 @@ class SerialDomain:
     def ghosts(self, X, global_id, width):
         return _NoHalo()
 
-    def problem_exchange(self, halo, first_ghost, margin):
+    def problem_exchange(self, halo, margin):
         return SerialExchange()
 
     def sum(self, value):

