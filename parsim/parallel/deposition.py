@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsim.core import kernel_mpi, sdbd
-from parsim.core.sdbd import blocks, grid as grid_module, rounds
+from parsim.core.sdbd import blocks, grid as grid_module, rounds, survey as survey_kernels
 from parsim.core.sdbd.blocks import FINAL, STOPPED
 from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, N_EVENT_KINDS
 from parsim.errors import JobError
@@ -119,12 +119,11 @@ class CellGrowth:
 
     def add(self, prep) -> None:
         """The particles of ``prep`` (a chunk), the next in drop order."""
-        diameters = 2.0 * prep.particle_scale * prep.shape_largest_radius[prep.particle_shape]
-        running = np.maximum.accumulate(np.maximum(diameters, self.cell[-1]))
-        grows = np.flatnonzero(np.diff(np.concatenate([[self.cell[-1]], running])) > 0)
+        grows, cells = survey_kernels.cell_growth(prep.particle_shape, prep.particle_scale,
+                                                  prep.shape_largest_radius, self.cell[-1])
         self.at += (self.seen + grows).tolist()
-        self.cell += running[grows].tolist()
-        self.seen += len(diameters)
+        self.cell += cells.tolist()
+        self.seen += len(prep.particle_shape)
 
     def after(self, particle) -> float:
         """The cell once ``particle`` has arrived."""
@@ -158,10 +157,11 @@ class BlockLayout:
 
     def owners(self, x) -> np.ndarray:
         """The block of each drop abscissa."""
-        if self.periodic:
-            x = self.low + np.mod(np.asarray(x) - self.low, self.length)
-        inner = self.edges[1:-1]
-        return np.searchsorted(inner, x, side="right").astype(np.int64)
+        return survey_kernels.block_owners(np.ascontiguousarray(x, dtype=np.float64), *self.block_search())
+
+    def block_search(self):
+        """What :mod:`parsim.core.sdbd.survey` needs to find a drop abscissa's block."""
+        return self.low, self.length, np.ascontiguousarray(self.edges[1:-1]), self.periodic
 
     def neighbours(self, k) -> list:
         """The other blocks whose regions meet block ``k``'s: where its particles' footprints and committed
@@ -367,11 +367,12 @@ class _Keeping:
     def add(self, chunk, particles_before, spheres_before) -> None:
         """The particles of ``chunk`` (a prepared chunk) that this rank owns; ``particles_before`` and
         ``spheres_before`` came in the chunks before it."""
-        counts = np.diff(chunk.shape_start)[chunk.particle_shape]
-        mine = np.flatnonzero(self.layout.owners(chunk.particle_drop_xy[:, 0]) == self.rank)
+        drop_x = np.ascontiguousarray(chunk.particle_drop_xy[:, 0])
+        mine, spheres_in_chunk = survey_kernels.rows_of_block(drop_x, chunk.particle_shape, chunk.shape_start,
+                                                              *self.layout.block_search(), self.rank)
         self.inputs.append(tuple(array[mine] for array in chunk.kernel_inputs()[3:]))
         self.index.append(particles_before + mine)
-        self.first_key.append(self.n_substrate + spheres_before + (np.cumsum(counts) - counts)[mine])
+        self.first_key.append(self.n_substrate + spheres_before + spheres_in_chunk)
 
     def own(self, prep, n_spheres) -> "_OwnParticles":
         """The rank's particles, their inputs in ``prep`` (of the whole run's ``n_spheres``)."""
