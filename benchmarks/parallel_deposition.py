@@ -74,8 +74,8 @@ def particle_chunks(n, box, seed=1):
 
 def shapes_and_box(box):
     offsets, radii = sphere()
-    return (0.5 * offsets, 0.5 * radii, np.array([0, 1])), ((0.0, 0.0), tuple(np.broadcast_to(box, 2)), sdbd.LATERAL_PERIODIC,
-                                                             sdbd.FLOOR_ROLL)
+    container = ((0.0, 0.0), tuple(np.broadcast_to(box, 2)), sdbd.LATERAL_PERIODIC, sdbd.FLOOR_ROLL)
+    return (0.5 * offsets, 0.5 * radii, np.array([0, 1])), container
 
 
 def deposit_spread(comm, n, box, seed=1, **options):
@@ -124,6 +124,8 @@ def main():
     options = parser.parse_args()
     comm = MPI.COMM_WORLD
     ranks = comm.Get_size()
+    if options.model and ranks > 1 and options.serial_seconds is None:
+        parser.error("--model on several ranks needs --serial-seconds: the serial time, from a run on one rank")
     deposit_spread(comm, 2000, 40.0, seed=2)  # compile
     comm.Barrier()
     reset_peak()
@@ -167,8 +169,8 @@ def main():
 
 
 class Counts:
-    """What a run of ``n`` particles counted, over its ranks: descents beyond one per particle (``twice``), rounds, bytes
-    and messages sent, the slowest rank's seconds settling and, per round, outside settling
+    """What a run of ``n`` particles counted, over its ranks: descents beyond one per particle (``twice``), rounds,
+    bytes and messages sent, the slowest rank's seconds settling and, per round, outside settling
     (``overhead``), the largest bytes one rank sent, and the survey's seconds."""
 
     def __init__(self, **values):

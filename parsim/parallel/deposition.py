@@ -65,6 +65,7 @@ REFERENCE_WINDOW = 1024
 REFERENCE_SIDE = 300.0
 SMALLEST_WINDOW, LARGEST_WINDOW = 16, 2048  # per rank
 
+
 class InvalidDeposition(JobError, ValueError):
     """An argument of :func:`deposit_decomposed` that :func:`parsim.core.sdbd.deposit` would refuse too
     (a ValueError, and a JobError: one line names it when a rank alone meets it)."""
@@ -96,16 +97,16 @@ def default_window(layout, prep, cell) -> int:
     blocks and ``D`` its depth, in grid columns; ``K`` blocks); a longer window only settles particles
     that will be settled again.  The window, in drop order, is REFERENCE_WINDOW scaled so, per rank the
     nearest power of two between SMALLEST_WINDOW and LARGEST_WINDOW: 512 in a box of 300 x 300 sphere
-    diameters on 2 ranks, 32 on 16.  Measured (docs/benchmarks.md): on 2 ranks and 10^6 spheres, 128 was
-    the fastest of 64-512 in a box of 100 x 100 diameters, 256 in one of 200 x 200 and 512 in one of
-    300 x 300; a block 18.75 diameters wide, as on 16 ranks, settles 3.4 % of its particles twice with
-    128, 0.9 % with 32."""
+    diameters on 2 ranks, 32 on 16.  Measured (docs/benchmarks.md): blocks 18.75 diameters wide, as on
+    16 ranks in that box, settle 3.4 % of their particles twice with 128 drop indices per rank, 1.5 %
+    with 64 and 0.84 % with 32, for 88, 56 and 39 us per round outside settling."""
     depth = float(prep.box_upper_xy[1] - prep.box_lower_xy[1]) if prep.lateral != LATERAL_NONE \
         else layout.length  # a heap: about as deep as its drop area is wide
     width, depth = layout.length / cell / REFERENCE_SIDE, max(depth / cell / REFERENCE_SIDE, 0.0)
     window = REFERENCE_WINDOW * width * math.sqrt(depth * 2.0 / layout.n_blocks)
     per_rank = math.floor(math.log2(max(window / layout.n_blocks, 1.0)) + 0.5)
     return int(min(max(1 << per_rank, SMALLEST_WINDOW), LARGEST_WINDOW))
+
 
 class CellGrowth:
     """The grid's cell after each particle's arrival (the largest sphere diameter so far, at least the

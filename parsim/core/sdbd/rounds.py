@@ -37,8 +37,8 @@ from parsim.core.sdbd.bundles import bundle, grid_arrays, new_grid, set_grid_arr
 from parsim.core.sdbd.engine import regrid
 
 __all__ = ["Plan", "run_rounds", "settle_again", "insert_parcel", "DONE", "LEFT_REGION", "STOPPED_AT_LIMIT",
-           "READ_CHANGED", "ROUNDS", "CONFLICTS", "ROUND_SECONDS", "SETTLE_SECONDS", "IDLE_SECONDS", "FOOTPRINT_BYTES", "HALO_BYTES", "HALO_PARTICLES",
-           "N_TALLIES"]
+           "READ_CHANGED", "ROUNDS", "CONFLICTS", "ROUND_SECONDS", "SETTLE_SECONDS", "IDLE_SECONDS", "FOOTPRINT_BYTES",
+           "HALO_BYTES", "HALO_PARTICLES", "N_TALLIES"]
 
 #: How a call of :func:`run_rounds` ends.
 DONE, LEFT_REGION, STOPPED_AT_LIMIT, READ_CHANGED = range(4)
