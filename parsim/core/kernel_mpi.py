@@ -257,7 +257,7 @@ def _reduced(values, halo, add):
 # has arrived and start a reduction, without waiting: communicator, size, the handles of MPI_DOUBLE
 # and MPI_MIN, request slots (int64, see above) and the bytes of one request, statuses, a flag, the
 # reduction's input and output, and a tally (LINK_* entries).  The parallel layer builds it
-# (:func:`parsim.parallel.deposition.kernel_link`).
+# (:func:`parsim.parallel.halo.kernel_link`).
 
 #: Entries of a link's tally: messages and bytes sent, seconds waiting for messages and reductions.
 LINK_MESSAGES, LINK_BYTES, LINK_WAIT_SECONDS = range(3)

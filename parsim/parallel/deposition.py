@@ -409,6 +409,7 @@ class _RankRun:
         self.periodic = layout.periodic
         self.length = (prep.box_upper_xy - prep.box_lower_xy).astype(float)
         self.owns_block = self.rank < layout.n_blocks
+        self.region = layout.region(self.rank) if self.owns_block else np.array([1.0, 0.0])  # empty: a rank beyond the blocks
         n = len(own.index)
         count = np.diff(prep.shape_start)[prep.particle_shape]
         sphere_row = np.cumsum(count) - count
@@ -423,12 +424,12 @@ class _RankRun:
             chunks=np.zeros(n, dtype=np.int64), spheres=np.zeros((int(count.sum()), 3)),
             signatures=np.zeros((n if check else 0, 2), dtype=np.int64))
         self.n_used += int(count.sum())  # every own particle's spheres have their slots from the start
-        region = layout.region(self.rank) if self.owns_block else np.array([1.0, 0.0])
         neighbours = layout.neighbours(self.rank) if self.owns_block else []
         cells = survey.cells
         self.plan = rounds.Plan(
             n_particles=self.n_particles, window=int(window), growth_at=np.array(cells.at, dtype=np.int64),
-            cell=np.array(cells.cell), side=np.array([_column_side(prep, cell) for cell in cells.cell]), region=region,
+            cell=np.array(cells.cell), side=np.array([_column_side(prep, cell) for cell in cells.cell]),
+            region=self.region,
             neighbours=np.array(neighbours, dtype=np.int64),
             neighbour_regions=np.array([layout.region(q) for q in neighbours]).reshape(-1, 2), length=self.length,
             periodic=self.periodic, clock_from=int(clock_from), n_max=self.n_max)
@@ -453,8 +454,7 @@ class _RankRun:
         self.key = np.full(capacity, -1, dtype=np.int64)
         grid_state = grid_module.grid_new(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, prep.first_cell,
                                           capacity, prep.polygon, prep.n_sides)
-        region = self.layout.region(self.rank) if self.owns_block else np.array([1.0, 0.0])
-        self.n_used, self.grid = blocks.lay_substrate(prep.substrate_positions, prep.substrate_radii, region,
+        self.n_used, self.grid = blocks.lay_substrate(prep.substrate_positions, prep.substrate_radii, self.region,
                                                       self.centre, self.radius, self.key, grid_state)
         self.n_substrate = self.n_used
 
@@ -480,9 +480,7 @@ class _RankRun:
             elif outcome == rounds.STOPPED_AT_LIMIT:  # the serial run stops at this particle too
                 stopped_at = particle
             else:
-                raise DecompositionError(
-                    f"particle {particle} was committed, but the sediment it read changed after it was settled: "
-                    f"the decomposed sediment would not be the serial one")
+                raise _read_changed(particle)
         clocked = MPI.Wtime() - self.clock[0] if not np.isnan(self.clock[0]) else float("nan")
         return self._share(stopped_at, clocked)
 
@@ -516,9 +514,7 @@ class _RankRun:
             changed = blocks.first_changed(first_row, last_row, rows.signatures, rows.rectangle, self.margin,
                                            rows.first_key, rows.status, self.grid, self.centre, self.key)
             if changed >= 0:
-                raise DecompositionError(
-                    f"particle {rows.index[changed]} was committed, but the sediment it read changed after it "
-                    f"was settled: the decomposed sediment would not be the serial one")
+                raise _read_changed(rows.index[changed])
 
     def _share_committed(self, first_row, last_row):
         """Send the newly committed rows to the ranks whose region holds one of their sphere centres;
@@ -644,6 +640,12 @@ class _RankRun:
                                     rows.com[kept], rows.rotation[kept], rows.contacts[kept], rows.state[kept],
                                     rows.events[kept], rows.steps[kept], rows.count[kept], rows.spheres[spheres],
                                     self.radius[slots].copy(), stopped_at, clocked_seconds, tally)
+
+
+def _read_changed(particle) -> "DecompositionError":
+    """The error of a committed particle whose read sediment changed after it was settled (the check)."""
+    return DecompositionError(f"particle {particle} was committed, but the sediment it read changed after it was "
+                              "settled: the decomposed sediment would not be the serial one")
 
 
 def _holds(ascending, value) -> bool:

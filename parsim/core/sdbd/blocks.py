@@ -48,8 +48,8 @@ from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.rotation import matrix_to_quat
 from parsim.core.sdbd.strips import mark_strips, meets_strips
 
-__all__ = ["ABSENT", "PRESENT", "STOPPED", "FINAL", "WITHDRAWN", "Rows", "new_scratch", "settle_rows", "first_failure", "insert_committed",
-           "withdraw", "lay_substrate", "read_signature", "first_changed", "drop_top",
+__all__ = ["ABSENT", "PRESENT", "STOPPED", "FINAL", "WITHDRAWN", "Rows", "new_scratch", "settle_rows", "first_failure",
+           "insert_committed", "withdraw", "lay_substrate", "read_signature", "first_changed", "drop_top",
            "rows_meeting", "rows_with_centre_in", "box_meets", "interval_within"]
 
 ABSENT, PRESENT, STOPPED, FINAL, WITHDRAWN = 0, 1, 2, 3, 4
@@ -199,7 +199,7 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
     box's beyond it included), its footprint and its rectangle, and its :func:`read_signature` when
     ``rows.signatures`` has rows; ``settles[0]`` counts the descents.  ``scratch`` is a
     :func:`new_scratch`, ``buf`` a query buffer.  ``given_top``: see :func:`_settle`.  Returns the
-    grid's arrays and the buffer."""
+    query buffer (a new one if it had to grow)."""
     particle, work, history, trace = scratch
     offsets, radii, start, shape, scale, rotation, drop_xy = particles
     floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell = settings

@@ -74,6 +74,14 @@ Local = bundle("Local", ["grid", "centre", "radius", "key", "n_used", "settled_e
 
 
 @jit
+def _local(grid, centre, radius, key, n_used, settled_end, margin, n_max):
+    """The :data:`Local` bundle over the caller's local sediment (``grid`` its arrays), with a new scratch for
+    particles of up to ``n_max`` spheres and a new query buffer."""
+    return Local(new_grid(*grid), centre, radius, key, n_used, settled_end, margin, new_scratch(n_max),
+                 np.empty(4096, dtype=np.int64))
+
+
+@jit
 def run_rounds(frontier, particles, settings, rows, plan, grid, centre, radius, key, n_used, settled_end, link,
                tally, settles, clock):
     """Rounds from ``frontier`` (every particle before it committed on every rank) until every
@@ -87,8 +95,7 @@ def run_rounds(frontier, particles, settings, rows, plan, grid, centre, radius, 
     Returns ``(outcome, particle, grid, centre, radius, key, n_used, settled_end, margin)``:
     DONE (particle: the number of particles), LEFT_REGION, STOPPED_AT_LIMIT or READ_CHANGED
     (particle: the one concerned, every particle before it committed)."""
-    local = Local(new_grid(*grid), centre, radius, key, n_used, settled_end, 0.0, new_scratch(plan.n_max),
-                  np.empty(4096, dtype=np.int64))
+    local = _local(grid, centre, radius, key, n_used, settled_end, 0.0, plan.n_max)
     outcome = DONE
     while frontier < plan.n_particles:
         started = kernel_mpi.now()
@@ -427,8 +434,7 @@ def settle_again(row, particles, settings, rows, plan, grid, centre, radius, key
                  settles):
     """Settle row ``row`` (its particle at the frontier) again on what the local sediment holds now, with
     the grid's cell of its turn.  Returns ``(grid, settled_end)``."""
-    local = Local(new_grid(*grid), centre, radius, key, n_used, settled_end, margin, new_scratch(plan.n_max),
-                  np.empty(4096, dtype=np.int64))
+    local = _local(grid, centre, radius, key, n_used, settled_end, margin, plan.n_max)
     _set_cell(local, _cell_after(plan, rows.index[row] - 1))
     withdraw(row, rows.status, rows.slot, rows.count, local.centre, local.radius, grid_arrays(local.grid))
     _settle_span(local, row, row + 1, particles, settings, rows, plan, np.zeros(N_TALLIES), settles)
@@ -439,7 +445,6 @@ def settle_again(row, particles, settings, rows, plan, grid, centre, radius, key
 def insert_parcel(counts, footprints, keys, centres, radii, first_row, rows, grid, centre, radius, key, n_used,
                   settled_end, margin, n_max):
     """:func:`_insert` from the caller.  Returns ``(grid, centre, radius, key, n_used)``."""
-    local = Local(new_grid(*grid), centre, radius, key, n_used, settled_end, margin, new_scratch(n_max),
-                  np.empty(0, dtype=np.int64))
+    local = _local(grid, centre, radius, key, n_used, settled_end, margin, n_max)
     _insert(local, counts, footprints, keys, centres, radii, first_row, rows)
     return local.grid.memory, local.centre, local.radius, local.key, local.n_used

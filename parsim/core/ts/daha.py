@@ -768,7 +768,6 @@ def _drop_settled(awake, settled, is_awake):
     return kept[:count]
 
 
-
 def motion_width(dimension):
     """Floats per row that the iterations send a neighbour: a moving sphere's position, velocity
     and damping (:func:`_share_motion`)."""
