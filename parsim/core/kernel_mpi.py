@@ -274,7 +274,8 @@ def _checked(code):
 @jit
 def post_send(values, count, destination, tag, link, slot):
     """Start sending ``values[:count]`` (float64) to rank ``destination``; its request takes slot
-    ``slot`` of the link, and lives until :func:`wait_slots` (``values`` must too)."""
+    ``slot`` of the link, and lives until :func:`wait_slots`, which is given the array ``values``
+    views, to keep it alive until then."""
     comm, _, double, _, slots, request_bytes, _, _, _, tally = link
     requests = slots.view(np.uint8)
     _checked(_isend(values.ctypes, count, double, destination, tag, comm,
@@ -333,8 +334,11 @@ def is_done(link, slot):
 
 
 @jit
-def wait_slots(link, first, count):
-    """Wait for the requests in slots ``first .. first + count - 1``."""
+def wait_slots(link, first, count, sent):
+    """Wait for the requests in slots ``first .. first + count - 1``.  ``sent`` is the array their
+    sends read: numba frees a local array after its last use in a function, and a send still in
+    flight (MPI's rendezvous protocol reads a large message only once the receive is posted) would
+    read freed memory; passing it here keeps it alive until they are done."""
     _, _, _, _, slots, request_bytes, statuses, _, _, _ = link
     if count > 0:
         requests = slots.view(np.uint8)

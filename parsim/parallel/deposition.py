@@ -40,6 +40,28 @@ committed ones of the others (the halo holds all in the region, the rectangle li
 and those committed after it was settled withdrew it if they touched its rectangle), and none of
 the particles being settled by other ranks (checked in 3).  So its descent read what the serial
 descent reads, step by step, and gives the same bits.
+
+The argument leans on three things that a run must not break, each of which once did:
+
+* *What it read is what it reads now.*  A row is settled while earlier rows of its rank may be out
+  (withdrawn, to be settled again): rows settled ahead while waiting, or after the rows a committed
+  particle touched.  An earlier row that comes back bitwise where it was leaves the rows settled
+  before it went out as they were, but not those settled in between, which did not see it: they
+  are withdrawn too if it meets their rectangle (:mod:`parsim.core.sdbd.blocks` keeps when each row
+  was settled and withdrawn).  How many rows are settled ahead depends on the timing of messages,
+  so without this the sediment differed from run to run.
+* *Messages are what was sent.*  A kernel sends from arrays it made itself; MPI reads a large message
+  only when the receive is posted, so the array must live until the send completes
+  (:func:`parsim.core.kernel_mpi.wait_slots` takes it).  Freed early, large parcels (particles of
+  many spheres, dense halos) arrived as garbage: overlapping particles at the borders, or a crash.
+* *Nothing else is read.*  Walls, the cylinder's sides and the floor are the same on every rank;
+  particles of unequal radii read within their rectangle widened by the largest column, the grid's
+  cell being that of the serial run at the same particle (it grows only between windows); a heap's
+  particles that roll out of the region are settled at the frontier on what every rank fetches.
+
+``deposit_decomposed(..., check=True)`` checks the first at every commit, and that the grid listed
+every sphere of the local sediment in the rectangle when the row was settled; ``jitter`` varies
+the timing at random.  ``benchmarks/spread_equivalence.py`` tries the claim on random jobs.
 """
 
 import math
@@ -245,7 +267,7 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
                      lateral, floor, trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
                      clock_from_particle=-1, wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX,
                      cylinder=None, substrate_positions=None, substrate_radii=None, halo=None,
-                     window_per_rank=None, check=False) -> DecomposedDeposition:
+                     window_per_rank=None, check=False, jitter=0.0) -> DecomposedDeposition:
     """:func:`deposit_decomposed` of particles that no rank holds all of: ``particle_chunks()`` yields
     ``(particle_shape, particle_scale, particle_rotation, particle_drop_xy)`` of consecutive particles in
     drop order, the same on every rank, and starts again from the first at every call (it is called
@@ -283,7 +305,7 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
         if window_per_rank is None:
             window_per_rank = default_window(layout, prep, survey.cells.cell[-1])
         share = _RankRun(comm, own, survey, layout, max(1, int(window_per_rank)) * layout.n_blocks, check,
-                         int(clock_from_particle)).run()
+                         int(clock_from_particle), float(jitter)).run()
         share.tally["survey_seconds"] = surveyed  # reading every particle's inputs, on every rank
         return share
     except BaseException as error:
@@ -400,7 +422,7 @@ class _RankRun:
     (:func:`parsim.core.sdbd.rounds.run_rounds`), which hands back to Python only a particle whose
     rectangle left its owner's region, to be settled on what its owner fetches from every rank."""
 
-    def __init__(self, comm, own, survey, layout, window, check, clock_from):
+    def __init__(self, comm, own, survey, layout, window, check, clock_from, jitter):
         self.comm = comm
         self.rank = comm.Get_rank()
         self.prep = prep = own.prep
@@ -422,7 +444,8 @@ class _RankRun:
             contacts=np.zeros(n, dtype=np.int8), state=np.zeros(n, dtype=np.int8),
             events=np.zeros((n, N_EVENT_KINDS), dtype=np.int32), steps=np.zeros(n, dtype=np.int32),
             chunks=np.zeros(n, dtype=np.int64), spheres=np.zeros((int(count.sum()), 3)),
-            signatures=np.zeros((n if check else 0, 2), dtype=np.int64))
+            signatures=np.zeros((n if check else 0, 3), dtype=np.int64), settled_at=np.zeros(n, dtype=np.int64),
+            withdrawn_at=np.zeros(n, dtype=np.int64))
         self.n_used += int(count.sum())  # every own particle's spheres have their slots from the start
         neighbours = layout.neighbours(self.rank) if self.owns_block else []
         cells = survey.cells
@@ -432,7 +455,8 @@ class _RankRun:
             region=self.region,
             neighbours=np.array(neighbours, dtype=np.int64),
             neighbour_regions=np.array([layout.region(q) for q in neighbours]).reshape(-1, 2), length=self.length,
-            periodic=self.periodic, clock_from=int(clock_from), n_max=self.n_max)
+            periodic=self.periodic, clock_from=int(clock_from), n_max=self.n_max, jitter=jitter,
+            jitter_seed=int(np.random.SeedSequence().entropy % 2**30) + self.rank if jitter > 0 else 0)
         self.link = kernel_link(comm, 1 + len(neighbours))
         self.settled_end = 0
         self.margin = float(self.plan.side[0])
@@ -480,7 +504,7 @@ class _RankRun:
             elif outcome == rounds.STOPPED_AT_LIMIT:  # the serial run stops at this particle too
                 stopped_at = particle
             else:
-                raise _read_changed(particle)
+                raise self._read_changed(particle)
         clocked = MPI.Wtime() - self.clock[0] if not np.isnan(self.clock[0]) else float("nan")
         return self._share(stopped_at, clocked)
 
@@ -514,7 +538,34 @@ class _RankRun:
             changed = blocks.first_changed(first_row, last_row, rows.signatures, rows.rectangle, self.margin,
                                            rows.first_key, rows.status, self.grid, self.centre, self.key)
             if changed >= 0:
-                raise _read_changed(rows.index[changed])
+                raise self._read_changed(rows.index[changed])
+
+    def _read_changed(self, particle) -> "DecompositionError":
+        """The error of a committed particle whose read sediment changed after it was settled (the check):
+        how many spheres of earlier particles its rectangle held then and now, and this rank's particles
+        settled since that have a sphere there (none: another rank's committed particle arrived)."""
+        rows = self.rows
+        row = self._row(particle)
+        box, margin = rows.rectangle[row], self.margin
+        now, _ = blocks.read_signature(box, margin, rows.first_key[row], self.grid, self.centre, self.key)
+        earlier = np.flatnonzero((rows.index < particle) & (rows.settled_at > rows.settled_at[row]))
+        widened = np.array([box[0] - margin, box[1] + margin, box[2] - margin, box[3] + margin])
+        inside = blocks.rows_with_centre_in(earlier, rows.slot, rows.count, self.centre, widened, self.length[0],
+                                            self.length[1], self.periodic)
+        since = rows.index[earlier[inside]].tolist()
+        if rows.signatures[row, 2] != rows.signatures[row, 0]:
+            return DecompositionError(
+                f"particle {particle} was settled on a grid that listed {rows.signatures[row, 0]} of the "
+                f"{rows.signatures[row, 2]} spheres of earlier particles its local sediment held in its rectangle "
+                f"x [{box[0]:.6g}, {box[1]:.6g}], y [{box[2]:.6g}, {box[3]:.6g}] widened by {margin:.6g}; the "
+                "decomposed sediment would not be the serial one")
+        return DecompositionError(
+            f"particle {particle} was committed, but the sediment it read changed after it was settled: its "
+            f"rectangle x [{box[0]:.6g}, {box[1]:.6g}], y [{box[2]:.6g}, {box[3]:.6g}] widened by {margin:.6g} held "
+            f"{rows.signatures[row, 0]} spheres of earlier particles then and {now} now; "
+            + (f"particles {since} of rank {self.rank} were settled there since" if since else
+               f"no particle of rank {self.rank} was settled there since: a committed particle of another rank "
+               "arrived") + "; the decomposed sediment would not be the serial one")
 
     def _share_committed(self, first_row, last_row):
         """Send the newly committed rows to the ranks whose region holds one of their sphere centres;
@@ -539,7 +590,7 @@ class _RankRun:
         from ``first_row`` on that they touch are withdrawn."""
         self.grid, self.centre, self.radius, self.key, self.n_used = rounds.insert_parcel(
             *parcel, first_row, self.rows, self.grid, self.centre, self.radius, self.key, self.n_used,
-            self.settled_end, self.margin, self.n_max)
+            self.settled_end, self.margin, self.n_max, self.settles)
 
     def _parcel(self, rows):
         """The spheres of ``rows`` as sent to another rank: counts, footprints, keys, wrapped centres, radii."""
@@ -635,17 +686,11 @@ class _RankRun:
                  "settle_seconds": float(counts[rounds.SETTLE_SECONDS]),
                  "idle_seconds": float(counts[rounds.IDLE_SECONDS]),
                  "messages": int(link[kernel_mpi.LINK_MESSAGES]), "particles": int(np.count_nonzero(final)),
-                 "chunk_steps": int(rows.chunks[kept].sum())}
+                 "chunk_steps": int(rows.chunks[kept].sum()), "jitter_seed": int(self.plan.jitter_seed)}
         return DecomposedDeposition(rows.index[kept], self.prep.particle_shape[kept], self.prep.particle_scale[kept],
                                     rows.com[kept], rows.rotation[kept], rows.contacts[kept], rows.state[kept],
                                     rows.events[kept], rows.steps[kept], rows.count[kept], rows.spheres[spheres],
                                     self.radius[slots].copy(), stopped_at, clocked_seconds, tally)
-
-
-def _read_changed(particle) -> "DecompositionError":
-    """The error of a committed particle whose read sediment changed after it was settled (the check)."""
-    return DecompositionError(f"particle {particle} was committed, but the sediment it read changed after it was "
-                              "settled: the decomposed sediment would not be the serial one")
 
 
 def _holds(ascending, value) -> bool:

@@ -24,8 +24,10 @@ rows it touches:
 
 * a row being settled withdraws the later present rows with spheres in its rectangle (they were
   not there in the serial run) and settles again if there were any;
-* a row settled again where it was before (bitwise) changes nothing; one that moved, or was
-  absent, withdraws the later rows whose rectangle meets its old or new spheres;
+* a row settled again where it was before (bitwise) changes nothing for the later rows settled
+  before it was withdrawn; those settled since (ahead, while it was out) did not see it, and
+  the ones whose rectangle meets its spheres are withdrawn.  A row that moved, or was absent,
+  withdraws the later rows whose rectangle meets its old or new spheres;
 * committed spheres of other ranks (halo, fetched) withdraw the rows whose rectangle they meet.
 
 :func:`read_signature` fingerprints what a row read, when it is settled and when it is committed,
@@ -96,52 +98,56 @@ def box_meets(box, other, margin, length_x, length_y, periodic):
 
 
 @jit
-def withdraw(row, status, slot, count, centre, radius, grid_state):
-    """Take row ``row`` (present or stopped) out of the local sediment: a present row becomes
-    WITHDRAWN (its slots keep its old centres, out of the grid, for :func:`settle_rows` to compare),
-    a stopped one ABSENT.  ``count[row]`` is its number of spheres, from slot ``slot[row]`` on."""
+def withdraw(row, rows, centre, radius, grid_state, now):
+    """Take row ``row`` (present or stopped) out of the local sediment at ``now`` (the rank's count
+    of descents, kept in ``rows.withdrawn_at``): a present row becomes WITHDRAWN (its slots keep
+    its old centres, out of the grid, for :func:`settle_rows` to compare), a stopped one ABSENT."""
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_state
+    status = rows.status
     if status[row] == PRESENT:
-        for j in range(slot[row], slot[row] + count[row]):
+        for j in range(rows.slot[row], rows.slot[row] + rows.count[row]):
             grid_remove(geom, igeom, head, col_top, nxt, hkeys, hval, j, centre[j, 0], centre[j, 1], centre[j, 2])
             radius[j] = 0.0  # out of the grid: not rebuilt into it
         status[row] = WITHDRAWN
+        rows.withdrawn_at[row] = now
     elif status[row] == STOPPED:
         status[row] = ABSENT
+        rows.withdrawn_at[row] = now
 
 
 @jit
-def _withdraw_met(first, last, box, by_footprint, status, footprint, rectangle, slot, count, centre, radius,
-                  grid_state, margin):
+def _withdraw_met(first, last, box, by_footprint, rows, centre, radius, grid_state, margin, now, settled_after):
     """Withdraw (with :func:`withdraw`) the present rows in ``first .. last - 1`` that ``box`` meets:
     with ``by_footprint``, those with a sphere in ``box`` (a rectangle read) widened by ``margin``
     (stopped rows have none); else those whose rectangle widened by ``margin`` meets ``box`` (the
-    footprint of spheres that joined).  Returns whether any was."""
+    footprint of spheres that joined), of those settled after ``settled_after`` (a count of
+    descents; -1: all).  Returns whether any was."""
     geom = grid_state[0]
     periodic = grid_state[1][0] == LATERAL_PERIODIC
+    status, footprint, rectangle = rows.status, rows.footprint, rows.rectangle
     any_met = False
     for o in range(first, last):
         if by_footprint:
             met = status[o] == PRESENT and box_meets(box, footprint[o], margin, geom[2], geom[3], periodic)
         else:
-            met = ((status[o] == PRESENT or status[o] == STOPPED)
+            met = ((status[o] == PRESENT or status[o] == STOPPED) and rows.settled_at[o] > settled_after
                    and box_meets(rectangle[o], box, margin, geom[2], geom[3], periodic))
         if met:
-            withdraw(o, status, slot, count, centre, radius, grid_state)
+            withdraw(o, rows, centre, radius, grid_state, now)
             any_met = True
     return any_met
 
 
 @jit
 def insert_committed(n_particles, particle_count, particle_footprint, sphere_key, sphere_centre, sphere_radius,
-                     first_slot, centre, radius, key, grid_state, first_row, last_row, status, footprint,
-                     rectangle, slot, count, margin):
+                     first_slot, centre, radius, key, grid_state, first_row, last_row, rows, margin, now):
     """Committed particles of other ranks join the local sediment in slots from ``first_slot`` on:
     particle ``k`` has ``particle_count[k]`` spheres (keys, wrapped centres, radii in the next rows
     of ``sphere_*``) and footprint ``particle_footprint[k]``.  The present or stopped rows in
     ``first_row .. last_row - 1`` whose rectangle widened by ``margin`` meets one of the footprints
-    are withdrawn first.  Returns the grid's arrays."""
+    are withdrawn first (at ``now``, a count of descents).  Returns the grid's arrays."""
     geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
+    status, rectangle = rows.status, rows.rectangle
     periodic = igeom[0] == LATERAL_PERIODIC
     marked, origin, width = mark_strips(particle_footprint, n_particles, 0.0, geom[2], periodic)
     for o in range(first_row, last_row):
@@ -152,8 +158,7 @@ def insert_committed(n_particles, particle_count, particle_footprint, sphere_key
             continue
         for k in range(n_particles):
             if box_meets(box, particle_footprint[k], margin, geom[2], geom[3], periodic):
-                withdraw(o, status, slot, count, centre, radius, (geom, igeom, head, col_top, nxt, hkeys, hval,
-                                                                  counts))
+                withdraw(o, rows, centre, radius, (geom, igeom, head, col_top, nxt, hkeys, hval, counts), now)
                 break
     j = first_slot
     for s in range(len(sphere_radius)):
@@ -172,10 +177,13 @@ def insert_committed(n_particles, particle_count, particle_footprint, sphere_key
 #: (``sphere_row``) and slots in the local sediment; their ``status`` (ABSENT ... WITHDRAWN),
 #: ``footprint`` and read ``rectangle`` (x_low, x_high, y_low, y_high); their centres of mass,
 #: quaternions, contacts, states, event counts, steps and chunk ends; their spheres as the particles
-#: hold them (``spheres``), and the :func:`read_signature` of each (``signatures``: no rows, none taken).
+#: hold them (``spheres``), the :func:`read_signature` of each and the spheres it should have seen
+#: (``signatures``: count, hash, count held; no rows, none taken), and
+#: when each was last settled and withdrawn (``settled_at``, ``withdrawn_at``: the rank's count of descents
+#: then, which only grows).
 Rows = namedtuple("Rows", ["index", "count", "first_key", "sphere_row", "slot", "status", "footprint", "rectangle",
                            "com", "rotation", "contacts", "state", "events", "steps", "chunks", "spheres",
-                           "signatures"])
+                           "signatures", "settled_at", "withdrawn_at"])
 
 
 @jit
@@ -208,7 +216,7 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
                        grid.igeom[0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, False)
     sediment = sediment_in(centre, radius)
     periodic = grid.igeom[0] == LATERAL_PERIODIC
-    status, footprint, rectangle, slot, count = rows.status, rows.footprint, rows.rectangle, rows.slot, rows.count
+    status, footprint, rectangle, slot = rows.status, rows.footprint, rows.rectangle, rows.slot
     for o in range(first, last):
         was = status[o]
         if was != ABSENT and was != WITHDRAWN:
@@ -220,9 +228,10 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
                                                         sediment, grid, ell, particle, work, history, descent,
                                                         rows.events[o], trace, buf, periodic, given_top)
             # later rows were not there in the serial run: settle again without those it read
-            if later == o + 1 or not _withdraw_met(o + 1, later, work.reads, True, status, footprint, rectangle,
-                                                   slot, count, centre, radius, grid_arrays(grid), margin):
+            if later == o + 1 or not _withdraw_met(o + 1, later, work.reads, True, rows, centre, radius,
+                                                   grid_arrays(grid), margin, settles[0], -1):
                 break
+        rows.settled_at[o] = settles[0]
         for k in range(read_box.N_READS):
             rectangle[o, k] = work.reads[k]
         if rows.signatures.shape[0]:
@@ -230,6 +239,8 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
                                                 key)
             rows.signatures[o, 0] = count_read
             rows.signatures[o, 1] = np.int64(digest)
+            rows.signatures[o, 2] = _count_held(rectangle[o], margin, rows.first_key[o], grid.geom, periodic, centre,
+                                                radius, key)
         rows.steps[o] = steps
         rows.chunks[o] = chunks
         rows.state[o] = state
@@ -246,14 +257,16 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
             _freeze_row(o, n, particle, n_c, sediment, grid, key, slot[o], rows.first_key[o], rows.com,
                         rows.rotation, rows.contacts, rows.spheres, rows.sphere_row[o], footprint)
             status[o] = PRESENT
-        # later rows settled while this one was elsewhere or absent read what changed
-        if moved and later > o + 1:
-            if was == WITHDRAWN:
-                _withdraw_met(o + 1, later, np.array(old), False, status, footprint, rectangle, slot, count, centre,
-                              radius, grid_arrays(grid), margin)
+        # later rows settled while this one was elsewhere read what changed; back where it was, it
+        # changes nothing for those settled before it was withdrawn, but those settled since did
+        # not see it
+        if later > o + 1:
+            if moved and was == WITHDRAWN:
+                _withdraw_met(o + 1, later, np.array(old), False, rows, centre, radius, grid_arrays(grid), margin,
+                              settles[0], -1)
             if state != EVENT_LIMIT:
-                _withdraw_met(o + 1, later, footprint[o], False, status, footprint, rectangle, slot, count, centre,
-                              radius, grid_arrays(grid), margin)
+                _withdraw_met(o + 1, later, footprint[o], False, rows, centre, radius, grid_arrays(grid), margin,
+                              settles[0], -1 if moved else rows.withdrawn_at[o])
         settled_end = later
     return buf
 
@@ -432,14 +445,31 @@ def read_signature(box, margin, below_key, grid_state, centre, key):
 
 
 @jit
+def _count_held(box, margin, below_key, geom, periodic, centre, radius, key):
+    """The spheres of the local sediment (slots of radius > 0) of key below ``below_key`` whose centre lies in
+    ``box`` widened by ``margin``, counted slot by slot: what :func:`read_signature` must find in the grid."""
+    count = 0
+    for j in range(radius.shape[0]):
+        if radius[j] > 0.0 and 0 <= key[j] < below_key:
+            x = centre[j, 0]
+            y = centre[j, 1]
+            if (interval_within(x, x, box[0] - margin, box[1] + margin, geom[2], periodic)
+                    and interval_within(y, y, box[2] - margin, box[3] + margin, geom[3], periodic)):
+                count += 1
+    return count
+
+
+@jit
 def first_changed(first, last, signatures, rectangle, margin, first_key, status, grid_state, centre, key):
     """The first committed row among ``first .. last - 1`` whose :func:`read_signature` now differs
-    from the one taken when it was settled, or -1."""
+    from the one taken when it was settled, or whose grid did not list every sphere of the local
+    sediment there when it was settled (``signatures[o, 2]``), or -1."""
     for o in range(first, last):
         if status[o] != FINAL:
             continue
         count_read, digest = read_signature(rectangle[o], margin, first_key[o], grid_state, centre, key)
-        if count_read != signatures[o, 0] or np.int64(digest) != signatures[o, 1]:
+        if (count_read != signatures[o, 0] or np.int64(digest) != signatures[o, 1]
+                or signatures[o, 2] != signatures[o, 0]):
             return o
     return -1
 

@@ -62,9 +62,12 @@ POLL_SECONDS = 25e-6
 #: each ``cell`` holds, the first 0; ``side``: the largest side of its columns), this rank's
 #: ``region`` and its ``neighbours``' (ranks, and regions as rows of x_low, x_high), the box's
 #: lateral ``length`` (x, y) and whether it is ``periodic``, the particle from whose commit the clock
-#: runs (-1: none), and the most spheres of a particle.
+#: runs (-1: none), and the most spheres of a particle; ``jitter`` (seconds, 0: none) and ``jitter_seed``
+#: inject random delays before every message and at every look at the messages, each settling ahead a
+#: random number of rows: what the sediment must not depend on (:func:`_jitter`).
 Plan = namedtuple("Plan", ["n_particles", "window", "growth_at", "cell", "side", "region", "neighbours",
-                           "neighbour_regions", "length", "periodic", "clock_from", "n_max"])
+                           "neighbour_regions", "length", "periodic", "clock_from", "n_max", "jitter",
+                           "jitter_seed"])
 
 #: The local sediment and where the rank is: its :class:`.bundles.Grid`, the slots' centres, radii and
 #: keys (the first ``n_used`` in use), the rows settled so far (``settled_end``), the margin of the
@@ -96,6 +99,8 @@ def run_rounds(frontier, particles, settings, rows, plan, grid, centre, radius, 
     DONE (particle: the number of particles), LEFT_REGION, STOPPED_AT_LIMIT or READ_CHANGED
     (particle: the one concerned, every particle before it committed)."""
     local = _local(grid, centre, radius, key, n_used, settled_end, 0.0, plan.n_max)
+    if plan.jitter > 0.0:
+        np.random.seed(plan.jitter_seed + frontier)
     outcome = DONE
     while frontier < plan.n_particles:
         started = kernel_mpi.now()
@@ -128,6 +133,7 @@ def _round(frontier, local, particles, settings, rows, plan, link, tally, settle
                              plan.periodic)
         if code >= 0:
             mine = code
+    _jitter(plan, kernel_mpi.now())
     kernel_mpi.post_minimum(float(mine), link, REDUCTION_SLOT)
     polled = kernel_mpi.now()
     while not kernel_mpi.is_done(link, REDUCTION_SLOT):
@@ -150,8 +156,7 @@ def _round(frontier, local, particles, settings, rows, plan, link, tally, settle
     if reason == FAIL_CONFLICT:  # settled again at the frontier, where it is exact
         tally[CONFLICTS] += 1.0
         if committed_row < rows.index.shape[0] and rows.index[committed_row] == new_frontier:
-            withdraw(committed_row, rows.status, rows.slot, rows.count, local.centre, local.radius,
-                     grid_arrays(local.grid))
+            withdraw(committed_row, rows, local.centre, local.radius, grid_arrays(local.grid), settles[0])
         return DONE, new_frontier
     return (LEFT_REGION if reason == FAIL_REGION else STOPPED_AT_LIMIT), new_frontier
 
@@ -186,10 +191,23 @@ def _settle_ahead(local, ahead_row, particles, settings, rows, plan, tally, sett
     now = kernel_mpi.now()
     if local.settled_end >= ahead_row:
         tally[IDLE_SECONDS] += now - since
-        return now
-    while local.settled_end < ahead_row and now - since < POLL_SECONDS:
+        return _jitter(plan, now)
+    rows_left = np.random.randint(0, 3) if plan.jitter > 0.0 else ahead_row
+    while local.settled_end < ahead_row and (now - since < POLL_SECONDS or plan.jitter > 0.0) and rows_left > 0:
         row = local.settled_end
         _settle_span(local, row, row + 1, particles, settings, rows, plan, tally, settles)
+        rows_left -= 1
+        now = kernel_mpi.now()
+    return _jitter(plan, now)
+
+
+@jit
+def _jitter(plan, now):
+    """With ``plan.jitter``, wait a random time up to it (a message late, a rank slow); returns the time then."""
+    if plan.jitter <= 0.0:
+        return now
+    until = now + plan.jitter * np.random.random()
+    while now < until:
         now = kernel_mpi.now()
     return now
 
@@ -266,10 +284,11 @@ def _share_footprints(local, first_row, last_row, ahead_row, particles, settings
                 for d in range(4):
                     send[at + 1 + d] = box[d]
                 at += FOOTPRINT_WIDTH
+        _jitter(plan, kernel_mpi.now())
         kernel_mpi.post_send(send[start:], at - start, plan.neighbours[k], FOOTPRINT_TAG, link, REDUCTION_SLOT + 1 + k)
         tally[FOOTPRINT_BYTES] += 8.0 * (at - start)
     received = _receive_all(local, FOOTPRINT_TAG, ahead_row, particles, settings, rows, plan, link, tally, settles)
-    kernel_mpi.wait_slots(link, REDUCTION_SLOT + 1, n_neighbours)
+    kernel_mpi.wait_slots(link, REDUCTION_SLOT + 1, n_neighbours, send)
     n = received.shape[0] // FOOTPRINT_WIDTH
     index = np.empty(n, dtype=np.int64)
     for j in range(n):
@@ -300,14 +319,15 @@ def _share_committed(local, first_row, last_row, ahead_row, particles, settings,
                                      plan.length[1], plan.periodic)
         start = at
         at = _pack_parcel(send, at, committed, inside, rows, local)
+        _jitter(plan, kernel_mpi.now())
         kernel_mpi.post_send(send[start:], at - start, plan.neighbours[k], COMMITTED_TAG, link, REDUCTION_SLOT + 1 + k)
         tally[HALO_BYTES] += 8.0 * (at - start - 2)
         tally[HALO_PARTICLES] += send[start]
     parcels = _receive_all(local, COMMITTED_TAG, ahead_row, particles, settings, rows, plan, link, tally, settles)
-    kernel_mpi.wait_slots(link, REDUCTION_SLOT + 1, n_neighbours)
+    kernel_mpi.wait_slots(link, REDUCTION_SLOT + 1, n_neighbours, send)
     at = 0
     while at < parcels.shape[0]:
-        at = _insert_packed(local, parcels, at, last_row, rows)
+        at = _insert_packed(local, parcels, at, last_row, rows, settles)
 
 
 @jit
@@ -368,7 +388,7 @@ def _receive_all(local, tag, ahead_row, particles, settings, rows, plan, link, t
 
 # ----------------------------------------------------------------------- the local sediment
 @jit
-def _insert_packed(local, parcel, at, first_row, rows):
+def _insert_packed(local, parcel, at, first_row, rows, settles):
     """The committed particles of another rank packed in ``parcel`` from ``at`` on (by
     :func:`_pack_parcel`) join the local sediment (:func:`_insert`); returns where the next parcel starts."""
     n_particles = np.int64(parcel[at])
@@ -390,22 +410,22 @@ def _insert_packed(local, parcel, at, first_row, rows):
             centres[j, d] = parcel[at + 1 + d]
         radii[j] = parcel[at + 4]
         at += SPHERE_WIDTH
-    _insert(local, counts, footprints, keys, centres, radii, first_row, rows)
+    _insert(local, counts, footprints, keys, centres, radii, first_row, rows, settles)
     return at
 
 
 @jit
-def _insert(local, counts, footprints, keys, centres, radii, first_row, rows):
+def _insert(local, counts, footprints, keys, centres, radii, first_row, rows, settles):
     """Committed particles of other ranks (particle ``k`` has ``counts[k]`` spheres, the next of ``keys``,
     ``centres`` (wrapped) and ``radii``, and footprint ``footprints[k]``) join the local sediment; the
-    present rows from ``first_row`` on whose rectangle meets one of them are withdrawn first."""
+    present rows from ``first_row`` on whose rectangle meets one of them are withdrawn first (at the
+    count of descents ``settles[0]``)."""
     if counts.shape[0] == 0:
         return
     first = _reserve(local, radii.shape[0])
     geom, igeom, head, col_top, nxt, hkeys, hval, grid_counts = insert_committed(
         counts.shape[0], counts, footprints, keys, centres, radii, first, local.centre, local.radius, local.key,
-        grid_arrays(local.grid), first_row, local.settled_end, rows.status, rows.footprint, rows.rectangle, rows.slot,
-        rows.count, local.margin)
+        grid_arrays(local.grid), first_row, local.settled_end, rows, local.margin, settles[0])
     set_grid_arrays(local.grid, geom, igeom, head, col_top, nxt, hkeys, hval, grid_counts)
 
 
@@ -436,15 +456,15 @@ def settle_again(row, particles, settings, rows, plan, grid, centre, radius, key
     the grid's cell of its turn.  Returns ``(grid, settled_end)``."""
     local = _local(grid, centre, radius, key, n_used, settled_end, margin, plan.n_max)
     _set_cell(local, _cell_after(plan, rows.index[row] - 1))
-    withdraw(row, rows.status, rows.slot, rows.count, local.centre, local.radius, grid_arrays(local.grid))
+    withdraw(row, rows, local.centre, local.radius, grid_arrays(local.grid), settles[0])
     _settle_span(local, row, row + 1, particles, settings, rows, plan, np.zeros(N_TALLIES), settles)
     return local.grid.memory, local.settled_end
 
 
 @jit
 def insert_parcel(counts, footprints, keys, centres, radii, first_row, rows, grid, centre, radius, key, n_used,
-                  settled_end, margin, n_max):
+                  settled_end, margin, n_max, settles):
     """:func:`_insert` from the caller.  Returns ``(grid, centre, radius, key, n_used)``."""
     local = _local(grid, centre, radius, key, n_used, settled_end, margin, n_max)
-    _insert(local, counts, footprints, keys, centres, radii, first_row, rows)
+    _insert(local, counts, footprints, keys, centres, radii, first_row, rows, settles)
     return local.grid.memory, local.centre, local.radius, local.key, local.n_used
