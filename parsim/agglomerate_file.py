@@ -7,6 +7,9 @@ Accepted files:
   everything after a ``#`` are ignored;
 - HDF5 in parsim's snapshot layout (``spheres/position`` (n, d), ``spheres/radius``),
   such as a task file of an aggregation job: its final cluster(s), discs embedded at z = 0.
+  A deposition task file spread over ranks is read as every task file is
+  (:func:`parsim.output.snapshot.read_arrays`): its spheres in the drop order, as in the
+  one-rank task file.
 
 A file that cannot be read as one of these raises a :class:`JobError` naming the job key,
 the file and, for a CSV, the line at fault.  The same files serve as a deposition's substrate
@@ -67,6 +70,9 @@ def _check_shapes(centres: np.ndarray, radii: np.ndarray, names=("positions", "r
 def _read_hdf5(path: Path, with_substrate: bool):
     import h5py
 
+    from parsim.errors import OutputError
+    from parsim.output.snapshot import read_arrays
+
     try:
         file = h5py.File(path, "r")
     except OSError as error:
@@ -76,7 +82,15 @@ def _read_hdf5(path: Path, with_substrate: bool):
             raise _Unreadable("an HDF5 agglomerate needs the datasets spheres/position (n, d) "
                                  "and spheres/radius (n,)")
         groups = ("substrate", "spheres") if with_substrate and "substrate/position" in file else ("spheres",)
-        read = [(_numbers_of(file, f"{group}/position"), _numbers_of(file, f"{group}/radius")) for group in groups]
+        names = [f"{group}/{array}" for group in groups for array in ("position", "radius")]
+        for name in names:
+            _check_numbers(file, name)
+        try:  # a deposition spread over ranks: its spheres in the drop order, as in the one-rank task file
+            arrays = read_arrays(file, names)
+        except OutputError as error:
+            raise _Unreadable(str(error)) from None
+    read = [(np.asarray(arrays[f"{group}/position"], dtype=float), np.asarray(arrays[f"{group}/radius"], dtype=float))
+            for group in groups]
     for group, (centres, radii) in zip(groups, read):
         _check_shapes(centres, radii, (f"{group}/position", f"{group}/radius"))
     if len({centres.shape[1] for centres, _ in read}) > 1:
@@ -85,14 +99,13 @@ def _read_hdf5(path: Path, with_substrate: bool):
     return np.concatenate([centres for centres, _ in read]), np.concatenate([radii for _, radii in read])
 
 
-def _numbers_of(file, name: str) -> np.ndarray:
-    """The dataset ``name`` of an open HDF5 file as float64; it must hold integers or floating-point numbers."""
+def _check_numbers(file, name: str) -> None:
+    """The dataset ``name`` of an open HDF5 file must hold integers or floating-point numbers."""
     import h5py
 
     item = file.get(name)
     if not isinstance(item, h5py.Dataset) or item.dtype.kind not in "iuf":
         raise _Unreadable(f"{name} must be a dataset of numbers (integers or floating point)")
-    return np.asarray(item[()], dtype=float)
 
 
 def _read_csv(path: Path):

@@ -12,8 +12,11 @@ A sediment spread over the ranks of a task's group (``parsim run --ranks-per-tas
 without gathering it: each rank writes its particles and spheres to ``LABEL.parts/rankNNNN.h5``
 beside the task file, and the task file ``LABEL.h5`` joins them as HDF5 virtual datasets, which
 h5py, netCDF4 and every HDF5 1.10+ reader open as one array (their rows in rank order;
-``particles/index`` holds each particle's place in the drop order).  :func:`read_configuration`
-returns the configuration in the serial order, the same as the one-rank task's.
+``particles/index`` holds each particle's place in the drop order).  Every parsim reader of task
+files reads them through :func:`read_arrays` (:func:`read_configuration`, ``parsim export`` and
+``parsim plot`` through it, a job's ``substrate`` and ``agglomerate_file`` too), which returns
+them in the serial order: the one-rank task's arrays, bit for bit.  Virtual datasets in that order
+would need a mapping per run of one rank's consecutive particles, about one per particle.
 """
 
 import io
@@ -177,36 +180,46 @@ def read_schema_attributes(path: Path) -> dict:
 
 def read_configuration(path: Path) -> Configuration:
     """The configuration of a task file, with every array of the snapshot; a spread configuration's
-    in the serial order (:data:`SERIAL_ORDER`)."""
-    arrays = {}
+    rows in the serial order (:func:`read_arrays`)."""
     with h5py.File(path, "r") as file:
-        file.visititems(lambda name, item: arrays.__setitem__(name, _read_array(path, item))
-                        if isinstance(item, h5py.Dataset) and not name.startswith(STATISTICS_GROUP) else None)
+        arrays = read_arrays(file)
         attrs = {name: value for name, value in file.attrs.items()}
-    return Configuration(arrays=_in_serial_order(arrays), box_lower=attrs.pop("box_lower"),
-                         box_upper=attrs.pop("box_upper"), periodic=attrs.pop("periodic"), attrs=attrs)
+    return Configuration(arrays=arrays, box_lower=attrs.pop("box_lower"), box_upper=attrs.pop("box_upper"),
+                         periodic=attrs.pop("periodic"), attrs=attrs)
 
 
-def _read_array(path: Path, dataset: h5py.Dataset) -> np.ndarray:
-    """The values of ``dataset``; a virtual one's part files must exist (HDF5 would read zeros instead)."""
+def read_arrays(file: h5py.File, names=None) -> dict:
+    """The datasets ``names`` of the open task file ``file`` (default: every one outside the statistics
+    group), as arrays, read by every reader of task files.
+
+    A spread configuration (:data:`PARTICLE_ORDER` in the file) stores its particles' and spheres' rows
+    rank after rank; they are returned in the serial (drop) order, each group by the stable sort of its
+    key in :data:`SERIAL_ORDER`, and without :data:`PARTICLE_ORDER` unless ``names`` asks for it, so that
+    a reader gets the one-rank configuration.  Names that are not datasets of ``file`` are left out.  A
+    joined array whose part file is missing is an :class:`OutputError`, not the zeros HDF5 would read.
+    """
+    if names is None:
+        names = []
+        file.visititems(lambda name, item: names.append(name) if isinstance(item, h5py.Dataset) and not
+                        name.startswith(STATISTICS_GROUP) and name != PARTICLE_ORDER else None)
+    wanted = list(names)
+    spread = isinstance(file.get(PARTICLE_ORDER), h5py.Dataset)
+    keys = [key for group, key in SERIAL_ORDER.items() if spread and any(name.startswith(group) for name in wanted)]
+    arrays = {name: _read_array(file, name) for name in dict.fromkeys([*wanted, *keys])
+              if isinstance(file.get(name), h5py.Dataset)}
+    for group, key in SERIAL_ORDER.items():
+        if key in keys and key in arrays:
+            order = np.argsort(arrays[key], kind="stable")
+            arrays.update({name: array[order] for name, array in arrays.items() if name.startswith(group)})
+    return {name: arrays[name] for name in wanted if name in arrays}
+
+
+def _read_array(file: h5py.File, name: str) -> np.ndarray:
+    """The values of dataset ``name``; a virtual one's part files must exist (HDF5 would read zeros instead)."""
+    dataset, path = file[name], Path(file.filename)
     if dataset.is_virtual:
         for source in dataset.virtual_sources():
-            if not (Path(path).parent / source.file_name).is_file():
+            if not (path.parent / source.file_name).is_file():
                 raise OutputError(f"task file {path} joins the ranks' files in {parts_folder(path)}, and "
                                   f"{source.file_name} is missing: copy or move the task file with that folder")
     return dataset[()]
-
-
-def _in_serial_order(arrays: dict) -> dict:
-    """The arrays of a spread configuration (rows in rank order) in the serial order, without the index
-    that orders them; other configurations as they are."""
-    if PARTICLE_ORDER not in arrays:
-        return arrays
-    ordered = dict(arrays)
-    for group, key in SERIAL_ORDER.items():
-        order = np.argsort(arrays[key], kind="stable")
-        for name, array in arrays.items():
-            if name.startswith(group):
-                ordered[name] = array[order]
-    del ordered[PARTICLE_ORDER]
-    return ordered
