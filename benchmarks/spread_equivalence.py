@@ -29,12 +29,16 @@ the first divergent particle and the job's TOML to reproduce it; ``--report`` wr
     python benchmarks/spread_equivalence.py --jobs 200 --seed 1 --ranks 2 3 4 [--timeout 120]
                                             [--report report.json] [--work DIR] [--no-check]
     python benchmarks/spread_equivalence.py --one job.toml --ranks 2 3 4   # one job, to reproduce
-    python benchmarks/spread_equivalence.py --one job.toml --ranks 2 --shrink [--found DIR]
+    python benchmarks/spread_equivalence.py --one job.toml --ranks 2 --particles 40   # its first 40
+    python benchmarks/spread_equivalence.py --one job.toml --ranks 2 --shrink [--found DIR] [--repeat 2]
 
 ``--no-check`` runs ``deposit_streamed`` without ``check=True`` (whether the sediment differs,
-rather than whether a committed particle's read changed).  ``--shrink`` bisects each failing job's
-``n_particles`` and writes the smallest failing job found, with its input files, to ``--found``
-(default benchmarks/found).  Exits with 1 if a job failed (or the serial deposit refused one).
+rather than whether a committed particle's read changed).  ``--particles N`` deposits only the
+first N particles of each job, from the job's own random stream (a job with ``n_particles = N``
+would draw other particles: the stream derives from the parameters).  ``--shrink`` bisects that
+number for each failing job and writes the job, with its input files and the command that runs its
+smallest failing number of particles, to ``--found`` (default benchmarks/found); ``--repeat R``
+runs each smaller job up to R times before it counts as passing (some failures do not repeat).  Exits with 1 if a job failed (or the serial deposit refused one).
 Input files a job needs (agglomerates, substrates, sieve curves, meshes) are written into the work
 folder (``--work``, default a temporary folder, kept when a job failed) and named by absolute path
 in its TOML.
@@ -344,25 +348,30 @@ def draw_jobs(count: int, seed: int, folder: Path) -> list[str]:
 # ---------------------------------------------------------------- running a job
 
 
-def task_inputs(text: str, spread: bool):
-    """The deposition inputs of the job's one task, as ``parsim run`` builds them."""
+def task_inputs(text: str, spread: bool, particles: int | None = None):
+    """The deposition inputs of the job's one task, as ``parsim run`` builds them; with ``particles``, of
+    its first ``particles`` particles alone (from the task's random stream, which derives from the job's
+    parameters: the job with ``n_particles = particles`` would draw other particles)."""
     job = parse_job(text, SOLVERS, source="<job>")
     task = job.tasks()[0]
-    return deposition_inputs(job.point_parameters(task.point), np.random.default_rng(job.seed_sequence(task)), spread)
+    params = job.point_parameters(task.point)
+    if particles is not None:
+        params = {**params, "n_particles": min(particles, params["n_particles"])}
+    return deposition_inputs(params, np.random.default_rng(job.seed_sequence(task)), spread)
 
 
-def serial_sediment(text: str):
-    inputs = task_inputs(text, spread=False)
+def serial_sediment(text: str, particles: int | None = None):
+    inputs = task_inputs(text, spread=False, particles=particles)
     drops, rotation, drop_xy = next(inputs.particles())
     return sdbd.deposit(*inputs.shapes, drops.species, drops.scale, rotation, drop_xy, *inputs.container,
                         **inputs.options)
 
 
-def spread_sediment(comm, text: str, check: bool = True):
+def spread_sediment(comm, text: str, check: bool = True, particles: int | None = None):
     """The gathered spread sediment on rank 0 (None on the others), the inputs and the blocks that held particles."""
     from parsim.parallel.deposition import deposit_streamed
 
-    inputs = task_inputs(text, spread=True)
+    inputs = task_inputs(text, spread=True, particles=particles)
     share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options,
                              check=check)
     blocks = sum(comm.allgather(int(share.tally["particles"] > 0)))
@@ -411,15 +420,16 @@ def first_overlap(result, inputs) -> dict | None:
 # ---------------------------------------------------------------- worker: the jobs of one K in one process
 
 
-def serial_worker(jobs: list[Path], work: Path, log: Path, check: bool) -> None:
+def serial_worker(jobs: list[Path], runs: "Runs", log: Path) -> None:
     """Each job's serial sediment, saved as ``work/serial/NAME.npz``; one JSON line per job in ``log``."""
+    work = runs.work
     (work / "serial").mkdir(exist_ok=True)
     serial_sediment(WARM_UP)
     for path in jobs:
         _log(log, {"job": path.stem, "event": "start"})
         start = time.perf_counter()
         try:
-            result = serial_sediment(path.read_text())
+            result = serial_sediment(path.read_text(), runs.particles)
         except Exception as error:  # a job the serial kernel refuses is no test of the spread one
             _log(log, {"job": path.stem, "outcome": "serial error", "error": f"{type(error).__name__}: {error}"})
             continue
@@ -428,10 +438,11 @@ def serial_worker(jobs: list[Path], work: Path, log: Path, check: bool) -> None:
                    "particles": len(result.state), "spheres": len(result.radii), "stopped_at": result.stopped_at})
 
 
-def spread_worker(jobs: list[Path], work: Path, log: Path, check: bool) -> None:
+def spread_worker(jobs: list[Path], runs: "Runs", log: Path) -> None:
     """Each job under this ``mpiexec``: the spread sediment against the serial one (rank 0 logs)."""
     from mpi4py import MPI
 
+    work = runs.work
     comm = MPI.COMM_WORLD
     spread_sediment(comm, WARM_UP)
     for path in jobs:
@@ -441,7 +452,7 @@ def spread_worker(jobs: list[Path], work: Path, log: Path, check: bool) -> None:
         if comm.rank == 0:
             _log(log, {"job": path.stem, "event": "start"})
         start = time.perf_counter()
-        whole, inputs, blocks = spread_sediment(comm, path.read_text(), check)
+        whole, inputs, blocks = spread_sediment(comm, path.read_text(), runs.check, runs.particles)
         if comm.rank == 0:
             with np.load(serial_file) as saved:
                 serial = {f: saved[f] for f in FIELDS}
@@ -470,6 +481,12 @@ class Runs:
     timeout: float
     check: bool = True
     repeat: int = 1  # runs of a job while shrinking, before it counts as passing (a failure may not repeat)
+    particles: int | None = None  # deposit only each job's first particles (see task_inputs)
+
+    def options(self) -> list[str]:
+        """The command line that gives a worker these settings."""
+        return [*(() if self.check else ("--no-check",)), *(("--particles", str(self.particles)) if self.particles
+                                                           else ())]
 
 
 def run_all(jobs: list[Path], ranks: int, runs: Runs) -> dict:
@@ -483,7 +500,7 @@ def run_all(jobs: list[Path], ranks: int, runs: Runs) -> dict:
         listed = work / f"left_{ranks}.txt"
         listed.write_text("\n".join(str(p) for p in left) + "\n")
         command = [sys.executable, __file__, "--worker", str(ranks), str(listed), str(work), str(log),
-                   *(() if runs.check else ("--no-check",))]
+                   "--timeout", str(runs.timeout), *runs.options()]
         if ranks > 1:
             command = [mpiexec(), "-n", str(ranks), *command]
         stderr, timed_out, current = _supervise(command, log, runs.timeout)
@@ -543,7 +560,7 @@ def _ended(job: str, stderr: str, timed_out: bool) -> dict:
     """The outcome of a job that ended its worker: a timeout, an exception (its message names the particle
     a DecompositionError found) or a crash (a signal, no message)."""
     error = _error_lines(stderr)
-    said = re.search(r"(\w+Error): (?:particle (\d+))?", error)
+    said = re.search(r"^(?:\w+\.)*(\w+Error): (?:particle (\d+))?", error, flags=re.MULTILINE)
     if timed_out:
         return {"job": job, "outcome": "timeout", "error": error}
     if said is None or "parsim: error" not in error:
@@ -553,10 +570,11 @@ def _ended(job: str, stderr: str, timed_out: bool) -> dict:
 
 
 def _error_lines(stderr: str) -> str:
-    """The lines of ``stderr`` that say what failed (the last 20 otherwise)."""
+    """What ``stderr`` says failed: from parsim's error line on (the failing rank's traceback), or its
+    last 20 lines."""
     lines = [line for line in stderr.splitlines() if line.strip()]
-    said = [line for line in lines if "error" in line.lower() or "failed" in line.lower()]
-    return "\n".join((said or lines)[-20:])
+    said = [k for k, line in enumerate(lines) if "parsim: error" in line]
+    return "\n".join(lines[said[0]:said[0] + 40] if said else lines[-20:])
 
 
 def failures(outcomes: dict) -> dict:
@@ -596,7 +614,7 @@ def _failure_detail(entry: dict) -> str:
     if entry.get("overlap"):
         overlap = entry["overlap"]
         return f"particles {overlap['particles']} overlap by {overlap['depth']:.3g} ({overlap['pairs']} pairs)"
-    return entry.get("error", "")
+    return (entry.get("error", "").splitlines() or [""])[-1]  # the exception; the report keeps its traceback
 
 
 def first_failures(report: dict) -> dict:
@@ -628,12 +646,13 @@ def search(jobs: list[Path], ranks: list[int], runs: Runs) -> dict:
 # ---------------------------------------------------------------- shrinking a failure
 
 
-def shrink(text: str, ranks: list[int], runs: Runs, tries: int = 8) -> tuple[str, dict]:
-    """The job ``text`` with the fewest particles found that still fails on one of ``ranks`` (the first
-    particles of a job are those of the same job with fewer, so a failure at particle p is first tried
-    with p + 1, then bisected), and its failure; ``tries`` runs at most."""
-    n = tomllib.loads(text)["parameters"]["n_particles"]
-    failure = _failure_of(text, ranks, replace(runs, work=runs.work / "shrink_0"))
+def shrink(text: str, ranks: list[int], runs: Runs, tries: int = 8) -> tuple[int, dict]:
+    """The fewest first particles of the job ``text`` found to fail still on one of ``ranks``, and their
+    failure; ``tries`` runs at most.  The particles keep the job's random stream (``--particles``), so the
+    first p of them are the same whatever their number: a divergence at particle p is first tried with
+    p + 1 particles, then the count is bisected."""
+    n = runs.particles or tomllib.loads(text)["parameters"]["n_particles"]
+    failure = _failure_of(text, ranks, replace(runs, work=runs.work / "shrink_0", particles=n))
     if failure is None:
         raise RuntimeError("the job does not fail: nothing to shrink")
     passing = 0
@@ -642,13 +661,12 @@ def shrink(text: str, ranks: list[int], runs: Runs, tries: int = 8) -> tuple[str
         candidate = first + 1 if first is not None and passing < first + 1 < n else (passing + n) // 2
         if candidate <= passing or candidate >= n:
             break
-        smaller = with_particles(text, candidate)
-        found = _failure_of(smaller, ranks, replace(runs, work=runs.work / f"shrink_{attempt}"))
+        found = _failure_of(text, ranks, replace(runs, work=runs.work / f"shrink_{attempt}", particles=candidate))
         if found is None:
             passing = candidate
         else:
-            text, n, failure = smaller, candidate, found
-    return text, failure
+            n, failure = candidate, found
+    return n, failure
 
 
 def _failure_of(text: str, ranks: list[int], runs: Runs) -> dict | None:
@@ -663,29 +681,10 @@ def _failure_of(text: str, ranks: list[int], runs: Runs) -> dict | None:
     return None
 
 
-def with_particles(text: str, n: int) -> str:
-    """The job ``text`` with ``n`` particles: ``n_particles`` of [parameters] and, with [[layers]], theirs
-    scaled to add up to ``n`` (each layer keeping at least one)."""
-    layers = tomllib.loads(text).get("layers", [])
-    counts = _scaled([layer["n_particles"] for layer in layers], n) if layers else []
-    values = iter([n, *counts])
-    return re.sub(r"^n_particles = \d+$", lambda _: f"n_particles = {next(values)}", text, flags=re.MULTILINE)
-
-
-def _scaled(counts: list[int], n: int) -> list[int]:
-    total = sum(counts)
-    scaled = [max(1, count * n // total) for count in counts]
-    scaled[-1] += n - sum(scaled)
-    while scaled[-1] < 1:  # too few particles for every layer: take them from the first layers
-        donor = max(range(len(scaled) - 1), key=lambda k: scaled[k])
-        scaled[donor] -= 1
-        scaled[-1] += 1
-    return scaled
-
-
-def keep_reproducer(text: str, failure: dict, folder: Path, name: str) -> Path:
+def keep_reproducer(text: str, particles: int, failure: dict, folder: Path, name: str) -> Path:
     """Write ``text`` as ``folder/NAME.toml`` with its input files copied beside it (named in the job
-    by absolute path), headed by a comment saying how it fails and how to run it."""
+    by absolute path), headed by a comment saying how its first ``particles`` particles fail and how to
+    run them."""
     folder.mkdir(parents=True, exist_ok=True)
     for original in sorted(set(re.findall(r'^\w+ = "(/[^"]+)"$', text, flags=re.MULTILINE))):
         source = Path(original)
@@ -694,9 +693,10 @@ def keep_reproducer(text: str, failure: dict, folder: Path, name: str) -> Path:
             shutil.copyfile(source, copy)
             text = text.replace(f'"{original}"', f'"{copy.resolve()}"')
     path = folder / f"{name}.toml"
-    detail = (_failure_detail(failure).splitlines() or [""])[-1]
-    path.write_text(f"# fails on {failure['ranks']} ranks: {failure['outcome']}: {detail}\n"
-                    f"#   python benchmarks/spread_equivalence.py --one {path} --ranks {failure['ranks']}\n" + text)
+    run = (f"python benchmarks/spread_equivalence.py --one {path} --particles {particles} --ranks {failure['ranks']}"
+           f"{'' if failure.get('check', True) else ' --no-check'}")
+    path.write_text(f"# its first {particles} particles fail on {failure['ranks']} ranks: {failure['outcome']}: "
+                    f"{_failure_detail(failure)}\n#   {run}\n" + text)
     return path
 
 
@@ -728,12 +728,15 @@ def main(argv=None) -> int:
                         "check=True: whether a sediment differs, rather than whether a committed read changed")
     parser.add_argument("--repeat", type=int, default=1, help="with --shrink: runs of a smaller job before it "
                         "counts as passing (default 1; more for failures that do not always repeat)")
+    parser.add_argument("--particles", type=int, help="deposit only the first PARTICLES particles of each job's "
+                        "task, from its own random stream (a job with n_particles = PARTICLES would draw others)")
     parser.add_argument("--worker", nargs=4, metavar=("RANKS", "JOBS", "WORK", "LOG"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
         ranks, listed, work, log = args.worker
         jobs = [Path(line) for line in Path(listed).read_text().split()]
-        (serial_worker if int(ranks) == 1 else spread_worker)(jobs, Path(work), Path(log), args.check)
+        runs = Runs(Path(work), args.timeout, args.check, particles=args.particles)
+        (serial_worker if int(ranks) == 1 else spread_worker)(jobs, runs, Path(log))
         return 0
     work = args.work or Path(tempfile.mkdtemp(prefix="spread_equivalence_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -741,7 +744,7 @@ def main(argv=None) -> int:
         jobs = write_jobs([args.one.read_text()], work / "jobs")
     else:
         jobs = write_jobs(draw_jobs(args.jobs, args.seed, _inputs_folder(work)), work / "jobs")
-    runs = Runs(work, args.timeout, args.check, max(1, args.repeat))
+    runs = Runs(work, args.timeout, args.check, max(1, args.repeat), args.particles)
     report = search(jobs, args.ranks, runs)
     print_summary(report)
     if args.report:
@@ -749,9 +752,11 @@ def main(argv=None) -> int:
     failed = bool(report["serial_errors"]) or any(tally["failed"] for tally in report["ranks"].values())
     if args.shrink:
         for job, failure in first_failures(report).items():
-            text, smallest = shrink(failure["toml"], [failure["ranks"]], replace(runs, work=work / f"shrink_{job}"))
-            name = f"{job}_{job_tag(text)}" if not args.one else args.one.stem
-            print(f"reproducer: {keep_reproducer(text, smallest, args.found, name)}")
+            shrinking = replace(runs, work=work / f"shrink_{job}")
+            particles, smallest = shrink(failure["toml"], [failure["ranks"]], shrinking)
+            name = f"{job}_{job_tag(failure['toml'])}" if not args.one else args.one.stem
+            kept = keep_reproducer(failure["toml"], particles, {**smallest, "check": runs.check}, args.found, name)
+            print(f"reproducer: {kept}")
     if args.work is None and not failed:
         shutil.rmtree(work, ignore_errors=True)
     elif args.work is None:
