@@ -38,10 +38,11 @@ first N particles of each job, from the job's own random stream (a job with ``n_
 would draw other particles: the stream derives from the parameters).  ``--shrink`` bisects that
 number for each failing job and writes the job, with its input files and the command that runs its
 smallest failing number of particles, to ``--found`` (default benchmarks/found); ``--repeat R``
-runs each smaller job up to R times before it counts as passing (some failures do not repeat).  Exits with 1 if a job failed (or the serial deposit refused one).
-Input files a job needs (agglomerates, substrates, sieve curves, meshes) are written into the work
-folder (``--work``, default a temporary folder, kept when a job failed) and named by absolute path
-in its TOML.
+runs each smaller job up to R times before it counts as passing (some failures do not repeat).
+
+Exits with 1 if a job failed (or the serial deposit refused one).  Input files a job needs
+(agglomerates, substrates, sieve curves, meshes) are written into the work folder (``--work``,
+default a temporary folder, kept when a job failed) and named by absolute path in its TOML.
 """
 
 import argparse
@@ -614,7 +615,8 @@ def _failure_detail(entry: dict) -> str:
     if entry.get("overlap"):
         overlap = entry["overlap"]
         return f"particles {overlap['particles']} overlap by {overlap['depth']:.3g} ({overlap['pairs']} pairs)"
-    return (entry.get("error", "").splitlines() or [""])[-1]  # the exception; the report keeps its traceback
+    said = re.findall(r"^(?:\w+\.)*\w+Error: .*$", entry.get("error", ""), flags=re.MULTILINE)
+    return said[-1] if said else (entry.get("error", "").splitlines() or [""])[-1]  # the report keeps the traceback
 
 
 def first_failures(report: dict) -> dict:
