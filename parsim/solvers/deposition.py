@@ -17,6 +17,7 @@ particles to its own file, joined by the task file (:mod:`parsim.output.snapshot
 import copy
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -471,6 +472,45 @@ def _spheres_of(params: dict, entry: dict) -> int:
 def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
     """One task on the ranks of ``comm`` (:func:`parsim.parallel.deposition.deposit_streamed` on
     several); every rank returns the statistics and its share of the configuration."""
+    spread = comm is not None and comm.Get_size() > 1
+    inputs = deposition_inputs(params, rng, spread)
+    if spread:
+        return _solve_spread(comm, params, inputs)
+    n = params["n_particles"]
+    drops, rotation, drop_xy = next(inputs.particles())
+    result = sdbd.deposit(*inputs.shapes, drops.species, drops.scale, rotation, drop_xy, *inputs.container,
+                          **inputs.options, progress=settled_reporter(n))
+    _check_sediment(params, result.stopped_at, np.all(np.isfinite(result.positions)))
+    return TaskResult(statistics.measure(params, result, inputs.species, drops, inputs.geometry, inputs.skip,
+                                         inputs.substrate),
+                      _configuration(params, inputs.geometry, result, inputs.species, drops, inputs.substrate))
+
+
+@dataclass(frozen=True)
+class DepositionInputs:
+    """A task's deposition as the kernels take it: the arguments of :func:`parsim.core.sdbd.deposit`
+    and of :func:`parsim.parallel.deposition.deposit_streamed` (``shapes``, the particles, ``container``,
+    ``options``), and what the statistics and the configuration need besides."""
+
+    shapes: tuple  # (shape_offsets, shape_radii, shape_start) of every species
+    container: tuple  # (box_lower_xy, box_upper_xy, lateral, floor)
+    options: dict  # the keyword arguments of both kernels
+    particles: Callable  # particles(): yields (drops, rotation, drop_xy) a chunk at a time, from the first particle
+    species: tuple
+    geometry: "_Geometry"
+    substrate: tuple  # (centres, radii)
+    skip: int  # particles left out of the timing
+
+    def kernel_chunks(self):
+        """``deposit_streamed``'s ``particle_chunks()``: (particle_shape, particle_scale, particle_rotation,
+        particle_drop_xy) a chunk at a time."""
+        return ((drops.species, drops.scale, rotation, drop_xy) for drops, rotation, drop_xy in self.particles())
+
+
+def deposition_inputs(params: dict, rng: np.random.Generator, spread: bool = False) -> DepositionInputs:
+    """The deposition of the task ``params`` whose random stream is ``rng`` (the task's: the same stream
+    gives the same particles), as :func:`solve` runs it: every particle in one chunk, or with ``spread``
+    (on several ranks) ``PARTICLE_CHUNK`` at a time.  Draws from ``rng``: call once per stream."""
     species = species_of(params)
     n = params["n_particles"]
     geometry = _container(params, species)
@@ -485,15 +525,8 @@ def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
                    clock_from_particle=skip if skip < n else -1, container=geometry.container,
                    cylinder=geometry.cylinder, substrate_positions=substrate[0] if len(substrate[1]) else None,
                    substrate_radii=substrate[1] if len(substrate[1]) else None)
-    if comm is not None and comm.Get_size() > 1:
-        chunks = _particle_chunks(params, species, geometry, rng, PARTICLE_CHUNK)
-        return _solve_spread(comm, params, chunks, shapes, container, options, species, geometry, skip, substrate)
-    drops, rotation, drop_xy = next(_particle_chunks(params, species, geometry, rng, max(n, 1))())
-    result = sdbd.deposit(*shapes, drops.species, drops.scale, rotation, drop_xy, *container, **options,
-                          progress=settled_reporter(n))
-    _check_sediment(params, result.stopped_at, np.all(np.isfinite(result.positions)))
-    return TaskResult(statistics.measure(params, result, species, drops, geometry, skip, substrate),
-                      _configuration(params, geometry, result, species, drops, substrate))
+    particles = _particle_chunks(params, species, geometry, rng, PARTICLE_CHUNK if spread else max(n, 1))
+    return DepositionInputs(shapes, container, options, particles, species, geometry, substrate, skip)
 
 
 def _particle_chunks(params, species, geometry, rng, chunk):
@@ -518,7 +551,7 @@ def _particle_chunks(params, species, geometry, rng, chunk):
     return chunks
 
 
-def _solve_spread(comm, params, chunks, shapes, container, options, species, geometry, skip, substrate) -> TaskResult:
+def _solve_spread(comm, params, inputs: DepositionInputs) -> TaskResult:
     """The task on the ranks of ``comm``: the sediment, bitwise the serial one, stays spread over them
     and no rank holds every particle; each rank returns the statistics, reduced over the ranks, and
     its share of the configuration."""
@@ -527,15 +560,13 @@ def _solve_spread(comm, params, chunks, shapes, container, options, species, geo
     from parsim.parallel.deposition import deposit_streamed
     from parsim.parallel.deposition_statistics import measure_decomposed
 
-    def inputs():
-        return ((drops.species, drops.scale, rotation, drop_xy) for drops, rotation, drop_xy in chunks())
-
-    share = deposit_streamed(comm, *shapes, inputs, *container, **options)
+    share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options)
     _check_sediment(params, share.stopped_at,
                     comm.allreduce(bool(np.all(np.isfinite(share.positions))), op=MPI.LAND))
     own = Drops(share.particle_shape, share.particle_scale)
-    return TaskResult(measure_decomposed(comm, params, share, species, own, geometry, skip, substrate),
-                      _configuration(params, geometry, share, species, own, substrate, comm))
+    return TaskResult(measure_decomposed(comm, params, share, inputs.species, own, inputs.geometry, inputs.skip,
+                                         inputs.substrate),
+                      _configuration(params, inputs.geometry, share, inputs.species, own, inputs.substrate, comm))
 
 
 def _check_sediment(params, stopped_at, finite) -> None:
