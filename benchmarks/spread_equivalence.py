@@ -368,13 +368,13 @@ def serial_sediment(text: str, particles: int | None = None):
                         **inputs.options)
 
 
-def spread_sediment(comm, text: str, check: bool = True, particles: int | None = None):
+def spread_sediment(comm, text: str, check: bool = True, particles: int | None = None, jitter: float = 0.0):
     """The gathered spread sediment on rank 0 (None on the others), the inputs and the blocks that held particles."""
     from parsim.parallel.deposition import deposit_streamed
 
     inputs = task_inputs(text, spread=True, particles=particles)
     share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options,
-                             check=check)
+                             check=check, jitter=jitter)
     blocks = sum(comm.allgather(int(share.tally["particles"] > 0)))
     return share.gather(comm), inputs, blocks
 
@@ -453,7 +453,7 @@ def spread_worker(jobs: list[Path], runs: "Runs", log: Path) -> None:
         if comm.rank == 0:
             _log(log, {"job": path.stem, "event": "start"})
         start = time.perf_counter()
-        whole, inputs, blocks = spread_sediment(comm, path.read_text(), runs.check, runs.particles)
+        whole, inputs, blocks = spread_sediment(comm, path.read_text(), runs.check, runs.particles, runs.jitter)
         if comm.rank == 0:
             with np.load(serial_file) as saved:
                 serial = {f: saved[f] for f in FIELDS}
@@ -483,11 +483,13 @@ class Runs:
     check: bool = True
     repeat: int = 1  # runs of a job while shrinking, before it counts as passing (a failure may not repeat)
     particles: int | None = None  # deposit only each job's first particles (see task_inputs)
+    jitter: float = 0.0  # deposit_streamed's random delays (seconds): the sediment must not depend on the timing
 
     def options(self) -> list[str]:
         """The command line that gives a worker these settings."""
         return [*(() if self.check else ("--no-check",)), *(("--particles", str(self.particles)) if self.particles
-                                                           else ())]
+                                                           else ()), *(("--jitter", str(self.jitter)) if self.jitter
+                                                                       else ())]
 
 
 def run_all(jobs: list[Path], ranks: int, runs: Runs) -> dict:
@@ -721,7 +723,10 @@ def main(argv=None) -> int:
     parser.add_argument("--report", type=Path, help="write the summary as JSON here")
     parser.add_argument("--work", type=Path, help="folder of the jobs, their input files and results (default: a "
                         "temporary folder, removed at the end)")
-    parser.add_argument("--one", type=Path, help="run this job file alone (reproduce a failure)")
+    parser.add_argument("--one", type=Path, nargs="+", help="run these job files instead of random ones (reproduce "
+                        "a failure, run the regression cases)")
+    parser.add_argument("--jitter", type=float, default=0.0, help="seconds of random delay injected before every "
+                        "message of the spread runs and at every look at the messages (default 0: none)")
     parser.add_argument("--shrink", action="store_true", help="shrink each failing job to the fewest particles "
                         "found that still fail, and write it with its input files to --found")
     parser.add_argument("--found", type=Path, default=REPOSITORY / "benchmarks" / "found",
@@ -737,16 +742,16 @@ def main(argv=None) -> int:
     if args.worker:
         ranks, listed, work, log = args.worker
         jobs = [Path(line) for line in Path(listed).read_text().split()]
-        runs = Runs(Path(work), args.timeout, args.check, particles=args.particles)
+        runs = Runs(Path(work), args.timeout, args.check, particles=args.particles, jitter=args.jitter)
         (serial_worker if int(ranks) == 1 else spread_worker)(jobs, runs, Path(log))
         return 0
     work = args.work or Path(tempfile.mkdtemp(prefix="spread_equivalence_"))
     work.mkdir(parents=True, exist_ok=True)
     if args.one:
-        jobs = write_jobs([args.one.read_text()], work / "jobs")
+        jobs = write_jobs([path.read_text() for path in args.one], work / "jobs")
     else:
         jobs = write_jobs(draw_jobs(args.jobs, args.seed, _inputs_folder(work)), work / "jobs")
-    runs = Runs(work, args.timeout, args.check, max(1, args.repeat), args.particles)
+    runs = Runs(work, args.timeout, args.check, max(1, args.repeat), args.particles, args.jitter)
     report = search(jobs, args.ranks, runs)
     print_summary(report)
     if args.report:
@@ -756,7 +761,7 @@ def main(argv=None) -> int:
         for job, failure in first_failures(report).items():
             shrinking = replace(runs, work=work / f"shrink_{job}")
             particles, smallest = shrink(failure["toml"], [failure["ranks"]], shrinking)
-            name = f"{job}_{job_tag(failure['toml'])}" if not args.one else args.one.stem
+            name = f"{job}_{job_tag(failure['toml'])}" if not args.one else args.one[0].stem
             kept = keep_reproducer(failure["toml"], particles, {**smallest, "check": runs.check}, args.found, name)
             print(f"reproducer: {kept}")
     if args.work is None and not failed:
