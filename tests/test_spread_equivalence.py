@@ -12,16 +12,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 REPOSITORY = Path(__file__).resolve().parent.parent
 SEARCH = REPOSITORY / "benchmarks" / "spread_equivalence.py"
 JOBS = 12
 SEED = 2027
 
 
-@pytest.mark.xfail(strict=False, reason="the spread deposition still differs from the serial one on some of these "
-                   "jobs (docs/benchmarks.md, the equivalence search); remove the marker once the kernels are fixed")
 def test_random_jobs_spread_over_ranks_give_the_serial_sediment(tmp_path):
     report_path = tmp_path / "report.json"
     done = subprocess.run([sys.executable, str(SEARCH), "--jobs", str(JOBS), "--seed", str(SEED), "--ranks", "2", "3",
