@@ -26,6 +26,15 @@ def reproducible_part(path: Path) -> xr.Dataset:
     return dataset
 
 
+def assert_same_statistics(one, spread):
+    """The statistics of a sediment spread over ranks are reduced over them: counts equal, floats to round-off
+    (sums in another order)."""
+    xr.testing.assert_allclose(one, spread, rtol=1e-11, atol=1e-13)
+    for name, variable in one.data_vars.items():
+        if variable.dtype.kind in "iub":
+            xr.testing.assert_identical(variable, spread[name])
+
+
 def snapshot_arrays(path: Path) -> dict[str, np.ndarray]:
     """Every dataset of a task file except its statistics group (which holds timings)."""
     arrays = {}

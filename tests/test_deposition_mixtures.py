@@ -152,6 +152,21 @@ def test_cylinder_holds_every_sphere():
     assert 0.45 < float(outcome.statistics["bulk_packing_fraction"]) < 0.62
 
 
+@pytest.mark.parametrize("container", [{"lateral": "walls", "box_length": 6.0},
+                                       {"container": "cylinder", "container_radius": 3.0}], ids=["box", "cylinder"])
+def test_a_species_without_particles_fits_the_walls(container):
+    """A rare species (1 % of 200 particles) may draw no particle, as it does in the 4-particle warm-up:
+    the check that every particle starts inside the walls passes over its shape."""
+    species = [{"name": "common", "shape": "sphere", "share": 0.99},
+               {"name": "rare", "shape": "rod", "shape_size": 2, "sphere_radius": 0.25, "share": 0.01}]
+    outcome = parsim.deposit(200, seed=3, species=species, packing_samples=1000, **container)
+    count = outcome.statistics["species_particles"].values
+    assert count.sum() == 200 and count[1] <= 10
+    cylinder = outcome.configuration.attrs.get("cylinder")
+    assert not sediment_problems(outcome, lateral=LATERAL_WALLS,
+                                 **({} if cylinder is None else {"cylinder": tuple(cylinder)}))
+
+
 @pytest.mark.parametrize("table, message", [
     ('[[species]]\nshape = "rod"\n', "missing key 'name'"),
     ('[[species]]\nname = "a"\ncolour = 1\n', "unknown key 'colour'"),

@@ -16,7 +16,7 @@ from parsim.job import parse_job
 from parsim.output.dataset import decoded
 from parsim.output.snapshot import parts_folder, read_configuration
 from parsim.solvers import SOLVERS
-from tests.datasets import reproducible_part, run_serial, snapshot_arrays
+from tests.datasets import assert_same_statistics, reproducible_part, run_serial, snapshot_arrays
 from tests.mpi import kill_session, mpiexec, parsim_command, run_mpi
 
 PROBE = "tests/scripts/group_probe.py"
@@ -145,15 +145,6 @@ def test_ed_job_on_groups_of_two_is_the_one_rank_job(tmp_path):
         assert one_arrays.keys() == four_arrays.keys() and one_arrays["diagnostics/rank_imbalance"].shape == (0,)
         for name, array in one_arrays.items():
             np.testing.assert_array_equal(array, four_arrays[name], err_msg=name)
-
-
-def assert_same_statistics(one, spread):
-    """The statistics of a sediment spread over ranks are reduced over them: counts equal, floats to round-off
-    (sums in another order)."""
-    xr.testing.assert_allclose(one, spread, rtol=1e-11, atol=1e-13)
-    for name, variable in one.data_vars.items():
-        if variable.dtype.kind in "iub":
-            xr.testing.assert_identical(variable, spread[name])
 
 
 @pytest.mark.mpi

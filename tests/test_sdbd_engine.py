@@ -5,6 +5,7 @@ checked by :mod:`tests.sediment_checks`, which works from the final positions al
 """
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -363,3 +364,21 @@ def test_frustrated_creep_at_a_small_trial_angle_terminates():
     assert ec[KIND["frustrated_trial_rotation"]] > 300
     # ... and got through: a few more events after the creep
     assert ec.sum() < 3000
+
+
+def test_a_spiky_particle_does_not_roll_into_a_sphere_its_circle_osculates():
+    """Regression: a spiky particle (L = 5, trial angle 1e-3) of the Fig. 8 job (particle 424 of
+    realisation 3) touching two spheres of a sediment particle with one of its spheres.  Rolling on
+    the first, its sphere's circle about the axis meets the second tangentially (rate -7e-15) and
+    curves into it slowly (second derivative of the gap -4e-4); a probe rotation by 1e-4 saw a drop
+    of 2e-12, below its tolerance, so the decision released the contact, the roll ran 0.43 rad into
+    the sphere (overlap 3.8e-5) and the particle then looped at zero angle until the event limit.
+    The fixture holds the particle and the sediment within 4 of its path, cut from its task."""
+    fixture = np.load(Path(__file__).parent / "data" / "spiky_on_an_osculating_sphere.npz")
+    res = run([(fixture["shape_offsets"], fixture["shape_radii"])], [0], fixture["particle_drop_xy"],
+              LATERAL_PERIODIC, FLOOR_STOP, (0.0, 0.0), fixture["box_upper_xy"], rot=fixture["particle_rotation"],
+              scale=fixture["particle_scale"], trial_angle=float(fixture["trial_angle"]),
+              max_events_per_particle=20_000, substrate_positions=fixture["substrate_positions"],
+              substrate_radii=fixture["substrate_radii"])
+    assert res.stopped_at == -1
+    assert res.state[0] in (RESTING_THREE_CONTACTS, RESTING_ON_FLOOR)

@@ -8,6 +8,7 @@ with numpy) in steps of ``STEP`` radians, the crossing being refined by bisectio
 import math
 
 import numpy as np
+import pytest
 
 from parsim.core.sdbd import events as ev
 from parsim.core.sdbd import rotation as rot
@@ -553,6 +554,29 @@ def test_released_contact_grazing_back_in_with_a_round_off_overlap():
                 if w >= 1e-5:
                     x = rotate(a, pivot, axis, 0.5 * phi)[0]
                     assert np.linalg.norm(x - s) - D > gap + 1e-12
+
+
+@pytest.mark.parametrize("excess", [1e-3, 1e-4, 1e-6, 1e-8, -1e-8, -1e-4])
+def test_a_tangent_contact_opens_as_its_gap_does(excess):
+    """A contact the rotation moves along (no first-order rate) opens or closes as its gap's second
+    derivative says, however small; the decision and the event solver agree.  The circle of ``a``
+    (radius 1 about the z axis) touches the sphere of radius ``D = 1 + excess`` about ``(1 - D, 0,
+    0)``: the gap goes as ``(1 / D - 1) phi^2 / 2``, closing for ``D > 1``.  (A spiky particle of
+    the Fig. 8 job, whose circle met a sphere so, with a curvature of 4e-4, was let roll 0.43 rad
+    into it; it stayed 3.8e-5 inside and looped at zero angle until the event limit.)"""
+    from parsim.core.sdbd.constants import OB_SPHERE
+    from parsim.core.sdbd.decision import contact_opens
+
+    pivot, axis, a = np.zeros(3), np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
+    D = 1.0 + excess
+    s = np.array([1.0 - D, 0.0, 0.0])
+    normal = (a - s) / D
+    opens = contact_opens(0, *pivot, *axis, a[None], s[None], normal[None], np.array([OB_SPHERE], dtype=np.int8),
+                          np.array([D]), np.zeros(1), 1.0)
+    gap_later = np.linalg.norm(rotate(a, pivot, axis, 0.1)[0] - s) - D
+    assert opens == (gap_later > 0.0), (excess, gap_later)
+    phi, _, _ = ev.sphere_contact_angle(a, pivot, axis, s, D, 1.0, ev.POLICY_NEW)
+    assert (phi == 0.0) == (not opens)
 
 
 def _arc_range_by_arctangent(rho, e1k, e2k, phi_lim):

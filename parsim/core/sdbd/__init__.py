@@ -597,7 +597,8 @@ def _first_outside_walls(offsets, radii, start, pshape, pscale, prot, pxy, lo, h
         o, r = offsets[start[s]:start[s + 1]], radii[start[s]:start[s + 1]]
         particles = np.flatnonzero(pshape == s)
         batch = max(1, FIT_CHECK_SPHERES // len(r))
-        for chosen in np.split(particles, np.arange(batch, len(particles), batch)):
+        for begin in range(0, len(particles), batch):  # none for a shape no particle has
+            chosen = particles[begin:begin + batch]
             scale = pscale[chosen]
             # sphere k of particle p at pxy[p] + scale[p] (R(q_p) o_k)_xy, radius scale[p] r_k
             xy = pxy[chosen, None, :] + scale[:, None, None] * np.einsum("pij,kj->pki",

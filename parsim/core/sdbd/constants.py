@@ -136,13 +136,16 @@ OVERLAP_LIMIT = 1e-9
 #: from the origin is ~1e-13 ell).
 TOUCH_TOL = 1e-10
 #: First-order rate d(gap)/d(phi) (length per radian) below RATE_TOL * ell in magnitude
-#: is "tangent": the second-order probe decides whether a contact opens.
+#: is "tangent": the second derivative of the gap decides whether a contact opens.
 RATE_TOL = 1e-10
-#: Angle of the second-order probe (rad): a tangent contact opens if its gap after a
-#: rotation by PROBE_ANGLE has not dropped by more than PROBE_TOL * ell (the quadratic
-#: term is ~ell * PROBE_ANGLE^2 / 2 = 5e-9 ell, the round-off ~1e-13 ell).
-PROBE_ANGLE = 1e-4
-PROBE_TOL = 1e-11
+#: A tangent contact opens unless the second derivative d^2(gap)/d(phi)^2 (length per
+#: radian squared) is below -CURVATURE_TOL * ell: over a rotation by pi the gap then drops by
+#: less than 5e-10 ell, below OVERLAP_LIMIT (the round-off of the derivative is ~1e-13 ell).
+#: The curvature is computed exactly, not from the gap after a small probe rotation: a gap
+#: that closes slowly (a moving sphere's circle nearly osculating the sphere it touches, a
+#: curvature of 4e-4 ell) drops by less than the round-off of two gaps after any probe angle
+#: small enough to be a second-order test.
+CURVATURE_TOL = 1e-10
 #: Falling is allowed when every contact normal has a z component <= NZ_TOL (the moving
 #: sphere is below or level with its sediment sphere); dimensionless.
 NZ_TOL = 1e-10

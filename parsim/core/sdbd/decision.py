@@ -54,7 +54,7 @@ FLOOR_ROLL.
 
 A candidate is *valid* when every other contact opens or stays closed under it: the rate
 ``N_l . (omega x (a_l - P))`` of its gap is positive, or, when it is tangent within
-``RATE_TOL``, the gap has not dropped after a probe rotation by ``PROBE_ANGLE`` (the
+``RATE_TOL``, the gap's second derivative is not negative (beyond ``CURVATURE_TOL``: the
 second-order test of eq. 31).  The steepest valid candidate is chosen, as the paper
 prescribes for three contacts (3.3.2); a rotation on one contact is always at least as
 steep as a rotation on two that includes it (its centre-of-mass path is the steepest on
@@ -78,6 +78,7 @@ import math
 from parsim.core.jit import jit
 from parsim.core.sdbd.bundles import geometry_arrays
 from parsim.core.sdbd.constants import (
+    CURVATURE_TOL,
     DESCENT_RATE_TOL,
     DESCENT_TOL,
     MOTION_FALL,
@@ -87,14 +88,12 @@ from parsim.core.sdbd.constants import (
     NZ_TOL,
     OB_SPHERE,
     OB_WALL_XLO,
-    PROBE_ANGLE,
-    PROBE_TOL,
     RATE_TOL,
     STEEP_TOL,
     TINY,
 )
 
-__all__ = ["contact_opens", "decide"]
+__all__ = ["contact_opens", "decide", "gap_curvature"]
 
 #: Two pivots closer than this (units of ell) are one point: no axis through them.
 _SAME_PIVOT = 1e-9
@@ -114,21 +113,24 @@ def contact_opens(l, p0, p1, p2, w0, w1, w2, ca, cP, cN, ckind, cD, cc0, ell):
         return True
     if g < -RATE_TOL * ell:
         return False
-    # tangent: second-order probe, eq. 15 by PROBE_ANGLE
-    c = math.cos(PROBE_ANGLE)
-    s = math.sin(PROBE_ANGLE)
-    k = (1.0 - c) * (w0 * r0 + w1 * r1 + w2 * r2)
-    x0 = p0 + k * w0 + c * r0 + s * v0
-    x1 = p1 + k * w1 + c * r1 + s * v1
-    x2 = p2 + k * w2 + c * r2 + s * v2
+    return gap_curvature(l, r0, r1, r2, w0, w1, w2, cN, ckind, cD) >= -CURVATURE_TOL * ell
+
+
+@jit(inline="always")
+def gap_curvature(l, r0, r1, r2, w0, w1, w2, cN, ckind, cD):
+    """The second derivative of the gap of contact ``l`` along the rotation about the unit axis
+    ``w``, its moving sphere's centre at ``r`` from a point of the axis, at a tangent contact
+    (first derivative zero).  With ``s`` the part of ``r`` normal to the axis (the radius of
+    the sphere's circle), ``-N . s`` for a plane and ``|s|^2 / D - N . s`` for a sphere at the
+    distance ``D``."""
+    wr = w0 * r0 + w1 * r1 + w2 * r2
+    s0 = r0 - wr * w0
+    s1 = r1 - wr * w1
+    s2 = r2 - wr * w2
+    curvature = -(cN[l, 0] * s0 + cN[l, 1] * s1 + cN[l, 2] * s2)
     if ckind[l] == OB_SPHERE:
-        g0 = math.sqrt((ca[l, 0] - cP[l, 0]) ** 2 + (ca[l, 1] - cP[l, 1]) ** 2
-                       + (ca[l, 2] - cP[l, 2]) ** 2)
-        g1 = math.sqrt((x0 - cP[l, 0]) ** 2 + (x1 - cP[l, 1]) ** 2 + (x2 - cP[l, 2]) ** 2)
-    else:
-        g0 = cN[l, 0] * ca[l, 0] + cN[l, 1] * ca[l, 1] + cN[l, 2] * ca[l, 2]
-        g1 = cN[l, 0] * x0 + cN[l, 1] * x1 + cN[l, 2] * x2
-    return g1 - g0 >= -PROBE_TOL * ell
+        curvature += (s0 * s0 + s1 * s1 + s2 * s2) / cD[l]
+    return curvature
 
 
 @jit(inline="always")

@@ -51,9 +51,8 @@ import numpy as np
 from parsim.core.jit import jit
 from parsim.core.sdbd.constants import (
     ANGLE_EPS,
+    CURVATURE_TOL,
     NZ_TOL,
-    PROBE_ANGLE,
-    PROBE_TOL,
     RATE_TOL,
     TOUCH_TOL,
 )
@@ -83,7 +82,7 @@ TWO_PI = 2.0 * math.pi
 
 #: Policy for an obstacle touched at ``phi = 0`` that was not a contact before the move:
 #: an entry at ``phi = 0`` is reported when the point moves into the forbidden side at
-#: first order, or at second order (probe).
+#: first order, or at second order (the curvature of its gap).
 POLICY_NEW = 0
 #: Policy for a contact that the steepest-descent decision has just released (it found
 #: the contact opening): the root at ``phi = 0`` is that opening and is skipped.
@@ -225,8 +224,9 @@ def first_entry(A, B, K, gap, gscale, ell, policy, limit=np.inf, cos_limit=-2.0)
 
     * ``POLICY_NEW``: the event is at ``phi = 0`` if the point moves into the forbidden
       side, at first order (rate ``> RATE_TOL ell``) or, when tangent, at second order
-      (after ``PROBE_ANGLE`` the gap dropped by more than ``PROBE_TOL ell``); otherwise the
-      root at 0 is the exit and the next entry is returned;
+      (``f'' = -A`` above ``CURVATURE_TOL ell`` in units of ``f``, the decision's test of
+      :func:`.decision.contact_opens`); otherwise the root at 0 is the exit and the next
+      entry is returned;
     * ``POLICY_TRUSTED``: the root at 0 is skipped.
 
     A touching point that leaves the obstacle at first order (``B < 0``) is at the exit
@@ -250,10 +250,8 @@ def first_entry(A, B, K, gap, gscale, ell, policy, limit=np.inf, cos_limit=-2.0)
             tb = RATE_TOL * ell * gscale
             if B > tb:
                 return 0.0, 1.0, 0.0
-            if B >= -tb:
-                df = A * (math.cos(PROBE_ANGLE) - 1.0) + B * math.sin(PROBE_ANGLE)
-                if df > PROBE_TOL * ell * gscale:
-                    return 0.0, 1.0, 0.0
+            if B >= -tb and -A > CURVATURE_TOL * ell * gscale:
+                return 0.0, 1.0, 0.0
         if B < 0.0:
             # leaving: the next entry of the touching position, gap snapped to 0
             M2 = A * A + B * B
