@@ -4,14 +4,13 @@ import numpy as np
 import pytest
 
 from parsim.core.sediment import (
-    _lens_volume,
     filling_height,
     packing_fraction,
     packing_fraction_profile,
     packing_fractions,
     union_volume_and_height,
 )
-from parsim.core.shapes.union import centre_of_mass_of_union
+from parsim.core.shapes.union import centre_of_mass_of_union, lens_volume as _lens_volume
 from parsim.core.structure import contact_network, coordination
 
 
