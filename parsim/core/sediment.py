@@ -19,7 +19,7 @@ c(x) the number of spheres covering x; it is non-zero only where spheres overlap
 a multi-sphere particle. It is held in the caps of each sphere towards the spheres it
 overlaps (:func:`parsim.core.shapes.union.overlap_caps`): a cap disjoint from the sphere's
 other caps holds exactly half the lens of the two spheres, whose volume below any height is
-computed to round-off (:func:`_lens_below`: Gauss–Legendre quadrature of circular segments
+computed to 4·10⁻¹³ of the lens (:func:`_lens_below`: Gauss–Legendre quadrature of circular segments
 along the lens's axis), so its share of every slab is exact. Other caps (multiple overlaps)
 are sampled by quasi-Monte Carlo (Halton points, rotated per cap by a shift drawn from the
 identities of its two spheres), with the exact half lens as control variate. The sample
@@ -472,17 +472,18 @@ def _slices_below(h, u_z, slope, centre, radius, low, high, nodes, weights):
 
     The slice's area below the plane is the segment of :func:`_segment_below` at the chord δ = (h − t u_z) /
     slope (all or nothing when the axis is vertical). It is analytic in t but where the plane touches a slice,
-    (h − t u_z)² = slope² ρ(t)², at t = h u_z + slope² c ± slope √(R² − (h − c u_z)²) (the slice through the
-    plane when the axis is vertical), and at
-    the ends of a sphere, where it behaves as powers of the square root of the distance. The interval is split
-    at the roots inside it and each piece integrated by Gauss–Legendre quadrature in φ of
-    t = a + (b − a)(1 − cos φ)/2, φ ∈ [0, π], which makes such square roots smooth (exponential convergence).
+    (h − t u_z)² = slope² ρ(t)², at t = h u_z + slope² c ± slope √(R² − (h − c u_z)²) (the slice
+    through the plane when the axis is vertical), and at the ends of a sphere, where it behaves as powers
+    of the square root of the distance. The interval is split at the roots inside it and each piece
+    integrated by Gauss–Legendre quadrature in φ of t = a + (b − a)(1 − cos φ)/2, φ ∈ [0, π], which makes
+    such square roots smooth (LENS_NODES nodes: see there for the measured accuracy).
     """
     cuts = np.empty(4)
     cuts[0] = low
     count = 1
     b = h * u_z + slope * slope * centre
-    inner = radius * radius - (h - centre * u_z) ** 2  # the discriminant b² − (h² − slope² (R² − c²)) over slope²
+    # the discriminant b² − (h² − slope² (R² − c²)) over slope²
+    inner = radius * radius - (h - centre * u_z) ** 2
     if inner >= 0.0:
         root = slope * np.sqrt(inner)
         for t in (b - root, b + root):

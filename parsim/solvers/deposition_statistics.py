@@ -311,7 +311,8 @@ class Whole:
     def of(cls, params, species, geometry, substrate, parts) -> "Whole":
         column = {key: [part[key] for part in parts] for key in parts[0]}
         n_particles, n_spheres = sum(column["particles"]), sum(column["spheres"])
-        mean_radius = (exact_sum(sum_expansion(substrate[1]), *column["radius"]) / (len(substrate[1]) + n_spheres))
+        substrate_radii = np.ascontiguousarray(substrate[1], dtype=np.float64)
+        mean_radius = exact_sum(sum_expansion(substrate_radii), *column["radius"]) / (len(substrate_radii) + n_spheres)
         diameter = exact_sum(*column["diameter"]) / n_particles
         largest = max(column["largest_radius"])
         n_species = len(species)
@@ -483,7 +484,8 @@ def packing_part(whole, spheres, overlapping, cover, lower, upper):
                                mean_radius=whole.mean_radius)
 
     everything = cover.covered(measured, whole.points)
-    volumes[0] = everything[0] if region.periodic else covered(spheres.in_area, np.array([whole.heights.bulk_slab()]))[0]
+    bulk = np.array([whole.heights.bulk_slab()])
+    volumes[0] = everything[0] if region.periodic else covered(spheres.in_area, bulk)[0]
     volumes[1:1 + bins] = everything[-bins:]
     deposited_only = not len(whole.substrate[1])
     for s in range(n_species):

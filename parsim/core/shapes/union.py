@@ -11,7 +11,6 @@ import math
 
 import numpy as np
 
-from parsim.core.growth import with_rows
 from parsim.core.jit import jit
 from parsim.core.shapes.checks import _check_centres_radii, _check_positive
 
