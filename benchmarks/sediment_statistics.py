@@ -56,9 +56,10 @@ SHAPES = {
 # the parts of the statistics: (owner, function) timed inside measure
 PARTS = {
     "contact search": (statistics.structure, "contact_network"),
-    "packing": (statistics, "_packing"),
-    "g(r)": (statistics, "_radial_distribution"),
-    "contact statistics": (statistics, "_contacts"),
+    "packing (overlaps)": (statistics, "packing_cover"),
+    "packing": (statistics, "packing_part"),
+    "g(r)": (statistics, "rdf_part"),
+    "contact statistics": (statistics, "contact_part"),
 }
 
 

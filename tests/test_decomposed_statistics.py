@@ -4,11 +4,11 @@ serial statistics of the gathered sediment.
 ``tests/scripts/decomposed_statistics_probe.py`` runs the deposition solver on 2 and 4 ranks for six
 small sediments (spheres in a periodic box wide enough for the ranks' frames to be narrower than it,
 rods and smaller spheres between walls, overlapping rods in a cylinder, a heap, spheres of several
-sizes on a substrate, and spheres on a substrate that rank 0 settles alone) and compares every
-statistic of ``measure_decomposed`` with ``measure`` of the gathered sediment. Counts must be equal,
-floats equal to round-off; the packing fraction of particles whose spheres overlap is partly sampled
-(quasi-Monte Carlo points that depend on how the spheres are grouped), so there it may differ by its
-sampling error.
+sizes on a substrate, and spheres on a substrate that rank 0 settles alone), and lays out a lattice of
+touching spheres over the ranks by hand; it compares every statistic of ``measure_decomposed`` with
+``measure`` of the gathered sediment. Counts must be equal, floats equal to round-off, also the packing
+fraction of particles whose spheres overlap, whose sampled part is drawn from the same points on any
+number of ranks.
 """
 
 import json
@@ -23,15 +23,12 @@ REPOSITORY = Path(__file__).resolve().parent.parent
 PROBE = str(REPOSITORY / "tests" / "scripts" / "decomposed_statistics_probe.py")
 
 ROUND_OFF = 1e-12  # relative to the largest magnitude of a statistic's values
-SAMPLED = ("bulk_packing_fraction", "packing_profile", "species_packing_profile")
-OVERLAPPING = ("overlapping rods, cylinder",)  # spheres overlap within particles: SAMPLED keys are sampled
-# measured (50 000 samples per slab): up to 6e-4 in a slab, 3.5e-5 in the bulk; one rod is 1e-2 of a slab
-SAMPLING_TOLERANCE = {"bulk_packing_fraction": 3e-4, "packing_profile": 3e-3, "species_packing_profile": 3e-3}
+LATTICE = "touching lattice, periodic"  # contacts at 1 diameter, an edge of g(r)'s shells
 ALONE = "substrate, rank 0 alone"  # the other ranks hold no particle
 NEVER_MEASURED = ("species_mesh_volume", "species_mesh_volume_error", "species_mesh_surface_distance")  # no mesh
 
 
-def mismatches(serial: dict, decomposed: dict, sampled: bool = False) -> list[str]:
+def mismatches(serial: dict, decomposed: dict) -> list[str]:
     """The statistics of ``decomposed`` that differ from ``serial`` by more than the rules allow (both as the
     probe writes them: dtype, shape, values)."""
     found = []
@@ -48,8 +45,6 @@ def mismatches(serial: dict, decomposed: dict, sampled: bool = False) -> list[st
         error = float(np.max(np.abs(a[finite] - b[finite]), initial=0.0))
         if expected["dtype"] == "int":
             allowed = 0.0
-        elif sampled and key in SAMPLED:
-            allowed = SAMPLING_TOLERANCE[key]
         else:
             allowed = ROUND_OFF * float(np.max(np.abs(a[finite]), initial=0.0))
         if error > allowed:
@@ -68,11 +63,11 @@ def report(request, tmp_path_factory):
 @pytest.mark.mpi
 def test_every_statistic_is_the_serial_statistic(report):
     _, outcome = report
-    assert len(outcome["cases"]) == 6
+    assert len(outcome["cases"]) == 7
     for name, case in outcome["cases"].items():
         assert case["missing"] == [] and case["extra"] == [], (name, case["missing"], case["extra"])
         assert case["same_on_every_rank"], name
-        assert mismatches(case["serial"], case["decomposed"], sampled=name in OVERLAPPING) == [], name
+        assert mismatches(case["serial"], case["decomposed"]) == [], name
 
 
 @pytest.mark.mpi
@@ -92,9 +87,18 @@ def test_the_reduction_and_the_halo_matter(report):
     for key in next(iter(cases.values()))["serial"]:
         if key not in NEVER_MEASURED:
             assert any(np.isfinite(case["serial"][key]["values"]).any() for case in cases.values()), key
-    # the overlapping rods' packing is sampled differently, but not far off: still checked to its tolerance
-    rods = cases[OVERLAPPING[0]]
-    assert mismatches(rods["serial"], rods["decomposed"], sampled=False) != []
+
+
+@pytest.mark.mpi
+def test_g_at_the_contact_distance_is_the_serial_g_to_the_bit(report):
+    """The lattice's contacts lie at 1 diameter, the edge between two shells: a distance computed from a copy
+    moved by the box's period would round to the other side of it. Every shell is the serial one, bit for bit,
+    and the two shells about the contact distance hold the contacts."""
+    _, outcome = report
+    serial, decomposed = (outcome["cases"][LATTICE][side]["radial_distribution"]["values"]
+                          for side in ("serial", "decomposed"))
+    assert serial == decomposed
+    assert serial[19] + serial[20] > 1.0  # 30 shells of 0.05 diameters: 19 ends, 20 starts at 1 diameter
 
 
 @pytest.mark.mpi
@@ -108,7 +112,7 @@ def test_the_comparison_finds_a_difference():
     serial = {"count": {"dtype": "int", "shape": [], "values": [12.0]},
               "mean": {"dtype": "float", "shape": [2], "values": [0.5, float("nan")]},
               "packing_profile": {"dtype": "float", "shape": [2], "values": [0.6, 0.3]}}
-    assert mismatches(serial, serial) == [] and mismatches(serial, serial, sampled=True) == []
+    assert mismatches(serial, serial) == []
 
     def changed(key, values=None, **fields):
         return {**serial, key: {**serial[key], **fields, **({"values": values} if values is not None else {})}}
@@ -117,7 +121,5 @@ def test_the_comparison_finds_a_difference():
     assert mismatches(serial, changed("count", dtype="float")) != []
     assert mismatches(serial, changed("mean", [0.5 * (1 + 1e-9), float("nan")])) != []
     assert mismatches(serial, changed("mean", [0.5, 0.0])) != []
-    assert mismatches(serial, changed("packing_profile", [0.6 + 1e-4, 0.3])) != []
-    assert mismatches(serial, changed("packing_profile", [0.6 + 1e-4, 0.3]), sampled=True) == []
-    assert mismatches(serial, changed("packing_profile", [0.6 + 1e-2, 0.3]), sampled=True) != []
+    assert mismatches(serial, changed("packing_profile", [0.6 * (1 + 1e-11), 0.3])) != []
     assert mismatches(serial, {k: v for k, v in serial.items() if k != "mean"}) != []

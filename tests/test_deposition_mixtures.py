@@ -198,15 +198,17 @@ def test_mesh_particles_rest_in_a_walled_box():
 def test_no_contact_across_opposite_walls():
     """Two spheres touching opposite walls of a walled box do not touch each other; in a periodic
     box of the same side they do, through the side."""
-    from parsim.solvers.deposition_statistics import Region, _contacts
+    from parsim.core.structure import contact_network
+    from parsim.solvers.deposition_statistics import contact_part
 
     length = 6.0
     positions = np.array([[0.5, 3.0, 0.5], [length - 0.5, 3.0, 0.5]])
-    for periodic, expected in ((False, 0.0), (True, 1.0)):
-        region = Region(np.zeros(2), np.full(2, length), periodic, True)
-        contacts = _contacts(positions, np.full(2, 0.5), np.arange(2), region, np.ones(2, dtype=bool))
-        assert contacts["bulk_coordination"] == expected
-        assert contacts["contact_number_fraction"][int(expected)] == 1.0
+    for periodic, expected in ((False, 0), (True, 1)):
+        network = contact_network(positions, np.full(2, 0.5), np.arange(2), np.zeros(2), np.full(2, length), periodic)
+        contacts = contact_part(network.pairs, network.normals, np.arange(2), np.ones(2, dtype=bool),
+                                np.ones(2, dtype=bool))
+        assert contacts["sphere_contacts"] == 2 * expected and contacts["bulk"] == 2
+        assert contacts["contact_numbers"][expected] == 2
 
 
 CHUNKED_JOB = """

@@ -1,17 +1,23 @@
 """Sediment statistics on packings whose answers are known analytically."""
 
+import math
+
 import numpy as np
 import pytest
 
 from parsim.core.sediment import (
-    _lens_volume,
+    SlabCover,
+    covered_volumes,
+    exact_sum,
     filling_height,
     packing_fraction,
     packing_fraction_profile,
     packing_fractions,
+    sphere_keys,
+    sum_expansion,
     union_volume_and_height,
 )
-from parsim.core.shapes.union import centre_of_mass_of_union
+from parsim.core.shapes.union import centre_of_mass_of_union, lens_volume as _lens_volume
 from parsim.core.structure import contact_network, coordination
 
 
@@ -174,3 +180,51 @@ def test_spheres_flagged_as_not_overlapping_need_no_overlap_search():
     np.testing.assert_array_equal(packing_fractions(x[part], radii[part], (0, 0), (side, side), slabs, samples=4000,
                                                     overlapping=flags[part]),
                                   packing_fractions(x[part], radii[part], (0, 0), (side, side), slabs, samples=4000))
+
+
+def test_exact_sums_do_not_depend_on_how_the_numbers_are_split():
+    """Sums over parts, as ranks make them, are the correctly rounded sum of all the numbers: math.fsum's."""
+    rng = np.random.default_rng(8)
+    values = rng.standard_normal(100_000) * 10.0 ** rng.integers(-8, 9, 100_000)
+    cut = rng.permutation(len(values))
+    parts = np.array_split(values[cut], 7)
+    assert exact_sum(sum_expansion(values)) == math.fsum(values)
+    assert exact_sum(*(sum_expansion(p) for p in parts)) == math.fsum(values)
+    assert float(np.sum(values)) != math.fsum(values) or float(sum(np.sum(p) for p in parts)) != math.fsum(values)
+
+
+def turned_rods(rng, n_side, layers, radius, spacing):
+    """Rods of three spheres ``spacing`` radii apart in random orientations on a lattice (no two rods meet):
+    (centres, radii, particle of each sphere, the rods' first spheres)."""
+    pitch = 2.0 * (1.0 + spacing) * radius * 1.01
+    i, j, k = np.meshgrid(np.arange(n_side), np.arange(n_side), np.arange(layers), indexing="ij")
+    centres = pitch * (np.column_stack([i.ravel(), j.ravel(), k.ravel()]) + 0.5)
+    u = rng.normal(size=centres.shape)
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    x = (centres[:, None, :] + spacing * radius * np.array([-1.0, 0.0, 1.0])[None, :, None] * u[:, None, :])
+    particle = np.repeat(np.arange(len(centres)), 3)
+    return x.reshape(-1, 3), np.full(3 * len(centres), radius), particle, pitch * n_side
+
+
+def test_a_sampled_cap_has_the_same_points_in_any_part_of_the_spheres():
+    """Rods of three spheres 0.5 radii apart (three overlap: sampled caps). With the spheres' keys, the covered
+    volumes of two halves of the rods add up to those of all rods, and a shuffled order of the spheres gives
+    them too, to round-off; with keys that are the order in which the spheres come, another order draws other
+    points."""
+    rng = np.random.default_rng(12)
+    x, radii, particle, side = turned_rods(rng, 4, 4, 0.5, 0.5)
+    keys = sphere_keys(particle, 3 * particle)
+    slabs = np.column_stack([np.linspace(0.0, side, 13)[:-1], np.linspace(0.0, side, 13)[1:]])
+    box = (0.0, 0.0), (side, side)
+    cover = SlabCover(x, radii, *box, np.unique(slabs), keys=keys)
+    assert cover.sampled_caps == 6 * (len(radii) // 3)
+    points = 700
+    whole = covered_volumes(x, radii, *box, slabs, keys=keys, points=points)
+    first = particle % 2 == 0
+    halves = sum(covered_volumes(x[m], radii[m], *box, slabs, keys=keys[m], points=points) for m in (first, ~first))
+    np.testing.assert_allclose(halves, whole, rtol=1e-13)
+    shuffle = rng.permutation(len(radii))
+    np.testing.assert_allclose(covered_volumes(x[shuffle], radii[shuffle], *box, slabs, keys=keys[shuffle],
+                                               points=points), whole, rtol=1e-13)
+    unkeyed = covered_volumes(x, radii, *box, slabs, points=points)
+    assert np.max(np.abs(covered_volumes(x[shuffle], radii[shuffle], *box, slabs, points=points) - unkeyed)) > 1e-9

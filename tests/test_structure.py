@@ -8,7 +8,7 @@ from parsim.core.shapes.simple import cube, rod, sphere, spiky
 from parsim.core.sediment import CONTACT_GAP_TOLERANCE
 from parsim.core.structure import (angle_distribution, contact_network, contact_number_distribution, contact_pairs,
                                    contacts_per_particle, coordination, fabric_anisotropy, fabric_tensor, lab_axes, long_axis,
-                                   nematic_order, radial_distribution, rotation_matrices, vertical_order)
+                                   nematic_order, radial_distribution, rotation_matrices, shell_counts, vertical_order)
 
 # Simple cubic lattice of touching spheres: spacing a = 1, n x n sites per layer in a box of side n.
 SIDE, LAYERS, RADIUS = 6, 8, 0.5
@@ -261,3 +261,28 @@ def test_shell_counts_are_those_of_every_pair_counted_directly(side, periodic):
     shell = 4.0 / 3.0 * np.pi * (edges[1:] ** 3 - edges[:-1] ** 3)
     assert n_ref == np.count_nonzero(reference) > 0
     np.testing.assert_allclose(g * n_ref * len(x) / (side**2 * height) * shell, counts, rtol=1e-12)
+
+
+def test_shell_counts_in_a_window_of_the_periodic_box_are_the_whole_box_counts_to_the_bit():
+    """Rows of touching spheres (centres exactly 1 apart along x, each row at a random offset) across a periodic
+    box; shells 0.05 wide, so that the contact distance is a shell's edge. The counts about the references of
+    one half of the box, counted in a window narrower than the box (the centres across its side outside it
+    by one period, as a rank holds them), are the whole box's: every distance x_j - x_i, then its minimum
+    image over the period, as in the whole box. Moving those centres by the period first changes them."""
+    side, r_max, bins = 16, 1.5, 30
+    offset = np.random.default_rng(4).random((side, side))
+    i, j, k = np.meshgrid(np.arange(side, dtype=float), np.arange(side), np.arange(side), indexing="ij")
+    x = np.column_stack([offset[j.ravel(), k.ravel()] + i.ravel(), j.ravel() + 0.5, k.ravel() + 0.5])
+    reference = np.flatnonzero((x[:, 0] < 0.5 * side) & (x[:, 2] > r_max) & (x[:, 2] < side - r_max))
+    whole = shell_counts(x, reference, r_max, bins, (0, 0), (side, side), True)
+    lower, upper = np.array([-3.5, 0.0]), np.array([side / 2 + 3.5, side])  # 15 of the box's 16 in x
+    near = (x[:, 0] < upper[0]) | (x[:, 0] >= side + lower[0])
+    window = np.flatnonzero(near)
+    inside = np.searchsorted(window, reference)
+    counts = shell_counts(x[window], inside, r_max, bins, lower, upper, True, period=(side, side))
+    np.testing.assert_array_equal(counts, whole)
+    assert whole[19] > 0 and whole[20] > 0  # the contacts, split by round-off about 1 diameter
+    moved = x[window].copy()
+    moved[moved[:, 0] >= upper[0], 0] -= side
+    assert not np.array_equal(shell_counts(moved, inside, r_max, bins, lower, upper, True, period=(side, side)),
+                              whole)

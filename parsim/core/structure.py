@@ -182,35 +182,70 @@ def region_radial_distribution(centres, in_region, region_volume, reference, r_m
     the N_V centres it holds and its volume ``region_volume`` (ρ = N_V / volume), and the indices
     ``reference`` of the reference centres, which the caller chooses at least ``r_max`` inside the
     region (e.g. within a disc shrunk by r_max). The box (``box_lower_xy`` … ``box_upper_xy``) lays
-    out the cell list and, when ``periodic`` in x and y, gives the minimum images.
+    out the cell list and, when ``periodic`` in x and y, gives the minimum images: the pairs of
+    :func:`shell_counts`, normalised by :func:`shell_density`.
     """
-    x = _as_points(centres)
-    lower, upper = np.asarray(box_lower_xy, dtype=np.float64), np.asarray(box_upper_xy, dtype=np.float64)
-    if not (r_max > 0.0 and bins >= 1 and region_volume > 0.0):
-        raise ValueError(f"need r_max > 0, bins >= 1 and a region of positive volume, got {r_max}, {bins}, "
-                         f"{region_volume}")
-    if periodic and r_max > 0.5 * np.min(upper - lower):
-        raise ValueError(f"r_max = {r_max} exceeds half the periodic box width {upper - lower}")
+    if not region_volume > 0.0:
+        raise ValueError(f"need a region of positive volume, got {region_volume}")
     reference = np.asarray(reference, dtype=np.int64)
     if max_references is not None and len(reference) > max_references:
         reference = reference[evenly_spaced(len(reference), max_references)]
+    counts = shell_counts(centres, reference, r_max, bins, box_lower_xy, box_upper_xy, periodic)
     edges = np.linspace(0.0, r_max, bins + 1)
-    r = 0.5 * (edges[1:] + edges[:-1])
+    return (0.5 * (edges[1:] + edges[:-1]), shell_density(counts, len(reference), np.count_nonzero(in_region),
+                                                          region_volume, r_max), len(reference))
+
+
+def shell_density(counts, references, n_region, region_volume, r_max):
+    """g(r) of pair ``counts`` in shells uniform on [0, ``r_max``) about ``references`` centres, in a region of
+    ``n_region`` centres and volume ``region_volume``: n / (N_ref ρ 4/3 π (r_2³ − r_1³)), ρ = N_V / V
+    (Allen & Tildesley 2017, sec. 2.6); NaN without references."""
+    counts = np.asarray(counts)
+    if references == 0:
+        return np.full(len(counts), np.nan)
+    edges = np.linspace(0.0, r_max, len(counts) + 1)
+    shell = 4.0 / 3.0 * np.pi * (edges[1:] ** 3 - edges[:-1] ** 3)
+    return counts / (references * (n_region / region_volume) * shell)
+
+
+def shell_counts(centres, reference, r_max, bins, box_lower_xy, box_upper_xy, periodic, period=None):
+    """Histogram (bins,) of the distances r < ``r_max`` from the ``reference`` centres (indices) to all other
+    ``centres``, in ``bins`` shells uniform on [0, r_max).
+
+    The box (``box_lower_xy`` … ``box_upper_xy``) lays out the cell list. ``periodic``: distances are minimum
+    images in x and y, over the box's widths or, when the box is a window of a wider periodic domain, over
+    ``period`` (its widths; centres outside the window by whole periods are wrapped into it for the cell list,
+    every reference's neighbours within r_max must lie in the window). A distance is computed from the
+    centres as given, x_j − x_i then its minimum image, so that the same pair gives the same bits in any
+    window (a pair at a shell's edge, as touching spheres are at 1 diameter, counts in the same shell).
+    """
+    x = _as_points(centres)
+    lower, upper = np.asarray(box_lower_xy, dtype=np.float64), np.asarray(box_upper_xy, dtype=np.float64)
+    if not (r_max > 0.0 and bins >= 1):
+        raise ValueError(f"need r_max > 0 and bins >= 1, got {r_max}, {bins}")
+    width = upper - lower if period is None else np.asarray(period, dtype=np.float64)
+    if periodic and r_max > 0.5 * np.min(np.minimum(width, upper - lower)):
+        raise ValueError(f"r_max = {r_max} exceeds half the periodic box width {upper - lower}")
+    reference = np.asarray(reference, dtype=np.int64)
     if len(reference) == 0:
-        return r, np.full(bins, np.nan), 0
+        return np.zeros(bins, dtype=np.int64)
+    placed = x
+    if periodic and period is not None:
+        placed = x.copy()
+        for axis in range(2):
+            out = (x[:, axis] < lower[axis]) | (x[:, axis] >= upper[axis])
+            placed[out, axis] = lower[axis] + np.mod(x[out, axis] - lower[axis], width[axis])
     # Only centres within r_max of a reference's height can be counted: the cell list holds those (with a
     # margin, so that round-off cannot leave one out), sorted by cell, so that a reference scans contiguous runs
     z = x[:, 2]
     reach = 1.001 * r_max
     nearby = np.flatnonzero((z >= z[reference].min() - reach) & (z <= z[reference].max() + reach))
-    grid = _SphereGrid(x[nearby], np.full(len(nearby), 0.5 * r_max / RDF_CELLS_PER_RANGE), lower, upper)
+    grid = _SphereGrid(placed[nearby], np.full(len(nearby), 0.5 * r_max / RDF_CELLS_PER_RANGE), lower, upper)
     sorted_index = np.full(len(x), -1, dtype=np.int64)  # a centre's place in the cell list
     sorted_index[nearby[grid.order]] = np.arange(len(grid.order))
-    counts = _shell_counts(grid.positions[grid.order], sorted_index[reference], r_max, bins, bool(periodic),
-                           grid.start, lower, upper, grid.z_lower, grid.cell_height, grid.cells, RDF_CELLS_PER_RANGE)
-    density = np.count_nonzero(in_region) / region_volume
-    shell = 4.0 / 3.0 * np.pi * (edges[1:] ** 3 - edges[:-1] ** 3)
-    return r, counts / (len(reference) * density * shell), len(reference)
+    return _shell_counts(grid.positions[grid.order], np.ascontiguousarray(x[nearby[grid.order]]),
+                         sorted_index[reference], r_max, bins, bool(periodic), grid.start, lower, upper, width,
+                         grid.z_lower, grid.cell_height, grid.cells, RDF_CELLS_PER_RANGE)
 
 
 def evenly_spaced(n, most):
@@ -380,23 +415,24 @@ def _in_box(x, lower, upper, periodic, z_low, z_high, margin):
 
 
 @jit
-def _shell_counts(sorted_centres, reference, r_max, bins, periodic, start, lower, upper, z_lower, cell_height,
-                  cells, reach):
+def _shell_counts(sorted_centres, sorted_given, reference, r_max, bins, periodic, start, lower, upper, period, z_lower,
+                  cell_height, cells, reach):
     """Histogram of the distances r < r_max from the reference centres to all other centres.
 
-    ``sorted_centres``: the centres of the cell list in its order, cell c holding start[c]:start[c + 1];
-    ``reference``: the references' places in it. Cells are r_max / ``reach`` or more wide, so a
-    reference scans ``reach`` cells on each side; the cells of one column are consecutive, so each
-    column is one run of the list.
+    ``sorted_centres``: the centres of the cell list in its order (wrapped into the box), cell c holding
+    start[c]:start[c + 1]; ``sorted_given``: the same centres as given, from which distances are computed
+    (minimum images over ``period`` when ``periodic``); ``reference``: the references' places in the list.
+    Cells are r_max / ``reach`` or more wide, so a reference scans ``reach`` cells on each side; the cells of
+    one column are consecutive, so each column is one run of the list.
     """
     width = upper - lower
     counts = np.zeros(bins, dtype=np.int64)
     columns = np.empty((2 * reach + 1) ** 2, dtype=np.int64)
     for i in reference:
-        xi, yi, zi = sorted_centres[i, 0], sorted_centres[i, 1], sorted_centres[i, 2]
-        ci = int(np.floor((xi - lower[0]) / width[0] * cells[0])) % cells[0]
-        cj = int(np.floor((yi - lower[1]) / width[1] * cells[1])) % cells[1]
-        ck = int(np.floor((zi - z_lower) / cell_height))
+        ci = int(np.floor((sorted_centres[i, 0] - lower[0]) / width[0] * cells[0])) % cells[0]
+        cj = int(np.floor((sorted_centres[i, 1] - lower[1]) / width[1] * cells[1])) % cells[1]
+        ck = int(np.floor((sorted_centres[i, 2] - z_lower) / cell_height))
+        xi, yi, zi = sorted_given[i, 0], sorted_given[i, 1], sorted_given[i, 2]
         bottom, top = max(ck - reach, 0), min(ck + reach + 1, cells[2])
         if bottom >= top:
             continue
@@ -405,11 +441,11 @@ def _shell_counts(sorted_centres, reference, r_max, bins, periodic, start, lower
             for j in range(start[columns[c] * cells[2] + bottom], start[columns[c] * cells[2] + top]):
                 if j == i:
                     continue
-                dx = sorted_centres[j, 0] - xi
-                dy = sorted_centres[j, 1] - yi
+                dx = sorted_given[j, 0] - xi
+                dy = sorted_given[j, 1] - yi
                 if periodic:
-                    dx, dy = _minimum_image(dx, width[0]), _minimum_image(dy, width[1])
-                dz = sorted_centres[j, 2] - zi
+                    dx, dy = _minimum_image(dx, period[0]), _minimum_image(dy, period[1])
+                dz = sorted_given[j, 2] - zi
                 distance_squared = dx * dx + dy * dy + dz * dz
                 if distance_squared < r_max * r_max:
                     counts[min(int(np.sqrt(distance_squared) / r_max * bins), bins - 1)] += 1

@@ -233,8 +233,9 @@ PARAMETERS = (
               "with an error naming it", low=1, high=sdbd.MAX_EVENT_LIMIT),
     Parameter("profile_bins", int, 50, "1", "number of slabs of the packing profile over 0 <= z <= 1.25 h",
               low=1, high=MAX_PROFILE_BINS, sweepable=False),
-    Parameter("packing_samples", int, 200_000, "1", "quasi-Monte Carlo points per slab for the overlaps of "
-              "spheres within a particle (sphere volumes are exact; measured error below 1e-4)", low=1000,
+    Parameter("packing_samples", int, 200_000, "1", "quasi-Monte Carlo points per slab for the multiple "
+              "overlaps of spheres within a particle (sphere volumes and pairwise lenses are exact; spread over the "
+              "sediment's sampled overlap caps, 16 to 65 536 per cap; measured error in docs/jobs.md)", low=1000,
               high=MAX_PACKING_SAMPLES),
     Parameter("timing_skip_fraction", float, 0.5, "1", "fraction of the particles, deposited first, left out "
               "of spheres_per_second (section 5: the first half)", low=0.0, high=1.0, high_inclusive=False),

@@ -24,7 +24,8 @@ the bulk when its centre of mass is.
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -32,9 +33,12 @@ from parsim.core import sdbd
 from parsim.core import structure
 from parsim.core.sediment import (
     CONTACT_GAP_TOLERANCE,
-    filling_height,
-    packing_fraction,
-    packing_fractions,
+    SlabCover,
+    covered_volumes,
+    exact_sum,
+    points_per_cap,
+    sphere_keys,
+    sum_expansion,
     union_volume_and_height,
 )
 from parsim.parameters import Parameter
@@ -224,56 +228,203 @@ def species_names(constants: dict) -> list[str]:
     return [constants.get("shape", "particles")]
 
 
+@dataclass(frozen=True)
+class Particles:
+    """Particles as one rank holds them, or all of a serial task: global indices (ascending), centres of mass,
+    sphere counts, and the spheres' centres and radii, particle after particle."""
+
+    index: np.ndarray
+    com: np.ndarray
+    count: np.ndarray
+    positions: np.ndarray
+    radii: np.ndarray
+
+    @classmethod
+    def of_result(cls, result) -> "Particles":
+        """Every particle of a :class:`parsim.core.sdbd.DepositionResult`."""
+        n = len(result.center_of_mass)
+        return cls(np.arange(n, dtype=np.int64), np.asarray(result.center_of_mass, dtype=np.float64).reshape(-1, 3),
+                   np.bincount(result.particle, minlength=n).astype(np.int64),
+                   np.asarray(result.positions, dtype=np.float64).reshape(-1, 3),
+                   np.asarray(result.radii, dtype=np.float64))
+
+    def subset(self, chosen) -> "Particles":
+        spheres = np.repeat(chosen, self.count)
+        return Particles(self.index[chosen], self.com[chosen], self.count[chosen], self.positions[spheres],
+                         self.radii[spheres])
+
+    def row_of_sphere(self) -> np.ndarray:
+        return np.repeat(np.arange(len(self.index)), self.count)
+
+    def sphere_keys(self) -> np.ndarray:
+        """The keys of the spheres (:func:`parsim.core.sediment.sphere_keys`): particle index and place in it."""
+        first = np.repeat(np.cumsum(self.count) - self.count, self.count)
+        return sphere_keys(np.repeat(self.index, self.count), first)
+
+
+def local_sums(own: Particles, species, drops) -> dict:
+    """What ``own`` particles (``drops``: their species and size factors) add to the sizes that steer the
+    measurement and to the species' totals: counts, extremes, and exact sums (expansions,
+    :func:`parsim.core.sediment.sum_expansion`) of the sphere radii, the volume-equivalent diameters, and
+    each species' volume V and V z of the centres of mass."""
+    diameters = np.array([s.equivalent_diameter for s in species])[drops.species] * drops.scale
+    extents = np.array([s.extent for s in species])[drops.species] * drops.scale
+    volume = np.array([s.volume for s in species])[drops.species] * drops.scale**3
+    xy = own.positions[:, :2]
+    by_species = [drops.species == k for k in range(len(species))]
+    return {"particles": len(own.index), "spheres": len(own.radii), "radius": sum_expansion(own.radii),
+            "diameter": sum_expansion(diameters), "largest_radius": float(own.radii.max(initial=0.0)),
+            "span": 2.0 * float(extents.max(initial=0.0)),
+            "low": xy.min(axis=0) if len(xy) else np.full(2, np.inf),
+            "high": xy.max(axis=0) if len(xy) else np.full(2, -np.inf),
+            "n_index": int(own.index.max(initial=-1)) + 1,
+            "species_count": np.bincount(drops.species, minlength=len(species)).astype(np.int64),
+            "species_volume": [sum_expansion(volume[mine]) for mine in by_species],
+            "species_moment": [sum_expansion(volume[mine] * own.com[mine, 2]) for mine in by_species]}
+
+
+@dataclass(frozen=True)
+class Whole:
+    """What the measurement needs of the whole sediment, the same on every rank that holds a part of it: from
+    the parts' :func:`local_sums` (one part for a serial task), and then the number of bulk particles and
+    of sampled overlap caps (:meth:`counted`). Sums of floats are exact and correctly rounded, so that they
+    have the same bits however the sediment is split, and so the bulk, the slabs and g(r)'s shells."""
+
+    params: dict
+    species: tuple
+    substrate: tuple
+    region: Region
+    heights: Heights
+    n_particles: int
+    n_index: int  # the largest particle index + 1
+    mean_radius: float  # of every sphere, the substrate's included (the contact and floor tolerances)
+    diameter: float  # mean volume-equivalent particle diameter
+    largest_radius: float  # of the particles' spheres
+    span: float  # the farthest two points of one particle (sphere centres, centre of mass) can be apart
+    species_count: np.ndarray
+    species_volume: np.ndarray  # sum of V per species
+    species_moment: np.ndarray  # sum of V z_cm per species
+    n_bulk: int = 0
+    points: int = 0  # sample points per sampled overlap cap
+
+    @classmethod
+    def of(cls, params, species, geometry, substrate, parts) -> "Whole":
+        column = {key: [part[key] for part in parts] for key in parts[0]}
+        n_particles, n_spheres = sum(column["particles"]), sum(column["spheres"])
+        substrate_radii = np.ascontiguousarray(substrate[1], dtype=np.float64)
+        mean_radius = exact_sum(sum_expansion(substrate_radii), *column["radius"]) / (len(substrate_radii) + n_spheres)
+        diameter = exact_sum(*column["diameter"]) / n_particles
+        largest = max(column["largest_radius"])
+        n_species = len(species)
+        volume = np.array([exact_sum(*(part[k] for part in column["species_volume"])) for k in range(n_species)])
+        moment = np.array([exact_sum(*(part[k] for part in column["species_moment"])) for k in range(n_species)])
+        extent = SimpleNamespace(positions=np.array([[*np.min(column["low"], axis=0), 0.0],
+                                                     [*np.max(column["high"], axis=0), 0.0]]),
+                                 radii=np.array([largest]))
+        volume_total = exact_sum(*(e for part in column["species_volume"] for e in part))
+        moment_total = exact_sum(*(e for part in column["species_moment"] for e in part))
+        return cls(params, tuple(species), substrate, measuring_region(params, geometry, extent, diameter),
+                   pile_heights(volume_total, moment_total, substrate), n_particles, max(column["n_index"]),
+                   mean_radius, diameter, largest, max(column["span"]), np.sum(column["species_count"], axis=0),
+                   volume, moment)
+
+    def counted(self, n_bulk, sampled_caps) -> "Whole":
+        """With the number of bulk particles and of sampled overlap caps of every part."""
+        slabs = len(self.measured_slabs())
+        return replace(self, n_bulk=int(n_bulk),
+                       points=points_per_cap(self.params["packing_samples"], slabs, int(sampled_caps)))
+
+    def in_bulk(self, com) -> np.ndarray:
+        """Which centres of mass ``com`` lie in the bulk (its area and slab)."""
+        slab = self.heights.bulk_slab()
+        return self.region.in_bulk_area(com[:, :2]) & (com[:, 2] >= slab[0]) & (com[:, 2] < slab[1])
+
+    def contact_tolerance(self) -> float:
+        return CONTACT_GAP_TOLERANCE * self.mean_radius
+
+    def shells(self):
+        """g(r)'s usable shells and range r_max, None when it has none."""
+        return rdf_shells(self.params, self.diameter, self.region)
+
+    def profile_slabs(self) -> np.ndarray:
+        edges = np.linspace(0.0, PROFILE_TOP * self.heights.filling, self.params["profile_bins"] + 1)
+        return np.column_stack([edges[:-1], edges[1:]])
+
+    def measured_slabs(self) -> np.ndarray:
+        """The slabs measured in one pass: in a periodic box the bulk's first, then the profile's."""
+        profile = self.profile_slabs()
+        return np.concatenate([[self.heights.bulk_slab()], profile]) if self.region.periodic else profile
+
+    def rdf_candidates(self, com) -> np.ndarray:
+        """Which centres of mass may be g(r)'s references: at least r_max inside the bulk."""
+        shells = self.shells()
+        if shells is None:
+            return np.zeros(len(com), dtype=bool)
+        r_max, slab = shells[1], self.heights.bulk_slab()
+        return ((com[:, 2] >= slab[0] + r_max) & (com[:, 2] < slab[1] - r_max)
+                & self.region.in_bulk_area(com[:, :2], r_max))
+
+
+@dataclass(frozen=True)
+class MeasuredSpheres:
+    """The spheres whose union a part measures: its particles' and, on one part, the substrate's (first), with
+    their keys, the species of their particle (-1 for the substrate) and whether the bulk of a walled
+    container counts them (a substrate sphere when its centre lies in the bulk's area, a particle's when its
+    centre of mass does)."""
+
+    positions: np.ndarray
+    radii: np.ndarray
+    keys: np.ndarray
+    species: np.ndarray
+    in_area: np.ndarray
+
+    @classmethod
+    def of(cls, whole, own, drops, with_substrate) -> "MeasuredSpheres":
+        substrate = whole.substrate if with_substrate else (np.zeros((0, 3)), np.zeros(0))
+        n_substrate = len(substrate[1])
+        row = own.row_of_sphere()
+        region = whole.region
+        return cls(np.concatenate([substrate[0], own.positions]), np.concatenate([substrate[1], own.radii]),
+                   np.concatenate([sphere_keys(np.full(n_substrate, whole.n_particles), np.zeros(n_substrate)),
+                                   own.sphere_keys()]),
+                   np.concatenate([np.full(n_substrate, -1), drops.species[row]]),
+                   np.concatenate([region.in_bulk_area(substrate[0][:, :2]), region.in_bulk_area(own.com[row, :2])]))
+
+
 def measure(params, result, species, drops, geometry, skip, substrate) -> dict:
     """Every statistic of a finished task (``result``: :class:`parsim.core.sdbd.DepositionResult`,
-    ``geometry``: the container as the kernel took it, ``substrate``: (centres, radii), empty without one)."""
-    volume = np.array([s.volume for s in species])[drops.species] * drops.scale**3
-    diameter = float(np.mean(np.array([s.equivalent_diameter for s in species])[drops.species] * drops.scale))
-    region = measuring_region(params, geometry, result, diameter)
-    heights = pile_heights(result.center_of_mass[:, 2], volume, substrate)
-    slab = heights.bulk_slab()
-    com = result.center_of_mass
-    in_area = region.in_bulk_area(com[:, :2])
-    in_bulk = in_area & (com[:, 2] >= slab[0]) & (com[:, 2] < slab[1])
-    if len(substrate[1]):
-        positions = np.concatenate([substrate[0], result.positions])
-        radii = np.concatenate([substrate[1], result.radii])
-        # the substrate is one more particle, index n, never in the bulk
-        particle = np.concatenate([np.full(len(substrate[1]), len(drops.scale)), result.particle])
-    else:
-        positions, radii, particle = result.positions, result.radii, result.particle
-    # a substrate sphere is in the bulk's area when its centre is, a deposited one when its particle's centre is
-    sphere_in_area = np.concatenate([region.in_bulk_area(substrate[0][:, :2]), in_area[result.particle]])
+    ``geometry``: the container as the kernel took it, ``substrate``: (centres, radii), empty without one):
+    :func:`combine` of the one part that is the whole sediment, the reduction a spread task makes over its
+    ranks (:mod:`parsim.parallel.deposition_statistics`)."""
+    own = Particles.of_result(result)
+    whole = Whole.of(params, species, geometry, substrate, [local_sums(own, species, drops)])
+    region = whole.region
+    in_bulk = whole.in_bulk(own.com)
+    spheres = MeasuredSpheres.of(whole, own, drops, True)
+    n = len(own.index)
+    # the substrate is one more particle, row n, never in the bulk
+    particle_row = np.concatenate([np.full(len(substrate[1]), n), own.row_of_sphere()])
     # one search of the sphere pairs gives the contacts and the spheres that overlap, whose overlaps alone
     # the packing fraction has to measure
-    network = structure.contact_network(positions, radii, particle, region.lower, region.upper, region.periodic)
-    statistics = {
-        "filling_height": heights.filling,
-        "substrate_height": heights.substrate,
-        "bulk_wall_distance": region.wall_distance,
-        **_packing(params, result, region, heights, drops, len(species), positions, radii, sphere_in_area,
-                   network.overlapping),
-        **mixture(result, species, drops, volume, heights),
-        **_orientations(params, result, species, drops, in_bulk),
-        "radial_distribution": _radial_distribution(params, com, diameter, region, slab),
-        **_contacts(positions, radii, particle, region, in_bulk, network),
-        "n_spheres": len(result.radii),
-        "events_per_particle": float(result.event_counts.sum(axis=1).mean()),
-        "largest_steps_per_particle": int(result.steps.max()),
-        "hanging_particles": int(np.isin(result.state, HANGING).sum()),
-        "particles_on_floor": particles_on_floor(result, CONTACT_GAP_TOLERANCE * float(np.mean(radii))),
-    }
-    counted_spheres = int(np.sum(result.particle >= skip))
-    statistics["spheres_per_second"] = (counted_spheres / result.clocked_seconds if result.clocked_seconds > 0
-                                        else np.nan)
-    for name, kind in EVENT_TOTALS.items():
-        statistics[name] = int(result.event_counts[:, sdbd.EVENT_KINDS.index(kind)].sum())
-    return statistics
+    network = structure.contact_network(spheres.positions, spheres.radii, particle_row, region.lower, region.upper,
+                                        region.periodic, mean_radius=whole.mean_radius)
+    cover = packing_cover(whole, spheres, network.overlapping, region.lower, region.upper)
+    whole = whole.counted(int(in_bulk.sum()), cover.sampled_caps if cover is not None else 0)
+    candidates = np.flatnonzero(whole.rdf_candidates(own.com))
+    references = candidates[structure.evenly_spaced(len(candidates), RDF_REFERENCES)] \
+        if len(candidates) > RDF_REFERENCES else candidates
+    part = {**contact_part(network.pairs, network.normals, particle_row, np.ones(n, dtype=bool), in_bulk),
+            **rdf_part(whole, own.com, references, region.lower, region.upper),
+            "packing": packing_part(whole, spheres, network.overlapping, cover, region.lower, region.upper),
+            **axis_part(whole, result.rotation, drops, in_bulk),
+            **count_part(whole, own, result, skip)}
+    return combine(whole, [part])
 
 
 def measuring_region(params, geometry, result, diameter) -> Region:
     """The horizontal box over which packing and contacts are measured, and the bulk's area: with walls
-    ``BULK_WALL_DIAMETERS`` times the mean volume-equivalent particle ``diameter`` away from them."""
+    ``BULK_WALL_DIAMETERS`` times the mean volume-equivalent particle ``diameter`` away from them (``result``:
+    anything with the sediment's extreme sphere ``positions`` and its largest ``radii``, for a heap's box)."""
     wall_distance = BULK_WALL_DIAMETERS * diameter
     if geometry.cylinder is not None:
         x, y, radius, sides = geometry.cylinder
@@ -289,91 +440,194 @@ def measuring_region(params, geometry, result, diameter) -> Region:
                   result.positions[:, :2].max(axis=0) + 2.0 * reach, False, False)
 
 
-def pile_heights(com_z, volume, substrate) -> Heights:
-    """h = 2 z_cm of the particles (centres of mass ``com_z``, volumes ``volume``) and of the union of
-    the substrate's spheres (section 4.1), and z_b = h V_substrate / (V_substrate + V_particles)."""
+def pile_heights(volume, moment, substrate) -> Heights:
+    """h = 2 z_cm of the particles (their total volume ``volume`` and first moment ``moment`` = sum V z_cm) and
+    of the union of the substrate's spheres (section 4.1), and z_b = h V_substrate / (V_substrate +
+    V_particles); the sums exact, correctly rounded."""
     if not len(substrate[1]):
-        return Heights(filling_height(com_z, volume))
+        return Heights(2.0 * moment / volume)
     substrate_volume, substrate_z = union_volume_and_height(*substrate)
-    height = filling_height(np.append(com_z, substrate_z), np.append(volume, substrate_volume))
-    return Heights(height, height * substrate_volume / (substrate_volume + float(volume.sum())))
+    total = exact_sum([volume, substrate_volume])
+    height = 2.0 * exact_sum([moment, substrate_volume * substrate_z]) / total
+    return Heights(height, height * substrate_volume / total)
 
 
-def _packing(params, result, region, heights, drops, n_species, positions, radii, sphere_in_area,
-             overlapping) -> dict:
-    """Bulk packing fraction and the profiles phi(z), phi_s(z) of the container (substrate spheres count in
-    the bulk and in phi(z)); ``sphere_in_area`` marks the spheres the bulk of a walled container counts,
-    ``overlapping`` those that may overlap others (the others need no search for overlaps)."""
-    bins = params["profile_bins"]
+def packing_cover(whole, spheres, overlapping, lower, upper):
+    """The :class:`parsim.core.sediment.SlabCover` of ``spheres`` (:class:`MeasuredSpheres`, ``overlapping``:
+    their flags) on the measured slabs, laid over the box ``lower`` ... ``upper``; None when the container has
+    no packing fraction or the part no sphere."""
+    if not whole.region.measured or not len(spheres.radii):
+        return None
+    return SlabCover(spheres.positions, spheres.radii, lower, upper, np.unique(whole.measured_slabs()), overlapping,
+                     spheres.keys, whole.mean_radius)
+
+
+def packing_part(whole, spheres, overlapping, cover, lower, upper):
+    """A part's volumes of the union of its ``spheres`` (``cover``: their :func:`packing_cover`): in the bulk slab
+    (with walls, of the spheres in the bulk's area), in the profile's slabs, and in the profile's slabs of each
+    species' spheres, one after the other; every sampled cap with the points per cap of the whole. None when
+    the container has no packing fraction."""
+    if not whole.region.measured:
+        return None
+    profile, measured = whole.profile_slabs(), whole.measured_slabs()
+    n_species, bins = len(whole.species), len(profile)
+    volumes = np.zeros(1 + (1 + n_species) * bins)
+    if cover is None:
+        return volumes
+    region = whole.region
+
+    def covered(chosen, slabs):
+        if not chosen.any():
+            return np.zeros(len(slabs))
+        return covered_volumes(spheres.positions[chosen], spheres.radii[chosen], lower, upper, slabs,
+                               overlapping=overlapping[chosen], keys=spheres.keys[chosen], points=whole.points,
+                               mean_radius=whole.mean_radius)
+
+    everything = cover.covered(measured, whole.points)
+    bulk = np.array([whole.heights.bulk_slab()])
+    volumes[0] = everything[0] if region.periodic else covered(spheres.in_area, bulk)[0]
+    volumes[1:1 + bins] = everything[-bins:]
+    deposited_only = not len(whole.substrate[1])
+    for s in range(n_species):
+        part = everything if n_species == 1 and deposited_only else covered(spheres.species == s, measured)
+        volumes[(1 + s) * bins + 1:(2 + s) * bins + 1] = part[-bins:]
+    return volumes
+
+
+def contact_part(pairs, normals, particle_row, own, in_bulk) -> dict:
+    """A part's share of the contact statistics, from the sphere contacts ``pairs`` (and ``normals``) of the
+    spheres it searched, ``particle_row`` of each (the substrate's: the number of particles), ``own``: the
+    particles whose contact numbers it counts (it must have searched every sphere near them), ``in_bulk``:
+    which particles lie in the bulk. Its own bulk particles' number, sphere contacts and histogram of
+    contact numbers; and the exact sums of n n over the contacts with a bulk particle whose lower particle
+    row is its own (each contact once over the parts)."""
+    cap = MAX_CONTACT_NUMBER
+    n = len(in_bulk)
+    mine = own & in_bulk
+    owners = particle_row[pairs].reshape(-1, 2)
+    bulk = np.append(in_bulk, False)  # the substrate is never in the bulk
+    counted = np.append(own, False)[owners.min(axis=1)] & (bulk[owners[:, 0]] | bulk[owners[:, 1]])
+    touched = structure.contacts_per_particle(pairs, particle_row, n + 1)[:n]
+    unit = normals[counted] / np.linalg.norm(normals[counted], axis=1)[:, None] if counted.any() else np.zeros((0, 3))
+    return {"bulk": int(mine.sum()),
+            "sphere_contacts": int(structure.sphere_contacts_per_particle(pairs, particle_row, n + 1)[:n][mine].sum()),
+            "contact_numbers": np.bincount(touched[mine], minlength=cap + 1)[:cap + 1].astype(np.int64),
+            "fabric": [sum_expansion(unit[:, a] * unit[:, b]) for a in range(3) for b in range(3)],
+            "fabric_contacts": int(counted.sum())}
+
+
+def rdf_part(whole, centres, references, lower, upper, period=None) -> dict:
+    """A part's share of g(r): its number of ``references`` (indices into ``centres``, every centre within r_max
+    of them among ``centres``) and their pairs in g(r)'s shells (:func:`parsim.core.structure.shell_counts`
+    over the box ``lower`` ... ``upper``, a window of the periodic box of ``period`` when given)."""
+    shells = whole.shells()
+    if shells is None or not len(references):
+        return {"references": 0, "shell_counts": np.zeros(shells[0] if shells else 0, dtype=np.int64)}
+    bins, r_max = shells
+    counts = structure.shell_counts(centres, references, r_max, bins, lower, upper, whole.region.periodic, period)
+    return {"references": len(references), "shell_counts": counts}
+
+
+def axis_part(whole, rotation, drops, in_bulk) -> dict:
+    """A part's share of the orientation statistics: of its bulk particles' long axes u their number, the exact
+    sums of u u and of P2(u_z), and the histogram of the angle to the vertical."""
+    bins = whole.params["orientation_bins"]
+    axes = long_axes(SimpleNamespace(rotation=rotation), whole.species, drops)[in_bulk]
+    axes = axes[np.all(np.isfinite(axes), axis=1)]
+    unit = axes / np.linalg.norm(axes, axis=1)[:, None] if len(axes) else np.zeros((0, 3))
+    return {"axes": len(axes), "moment": [sum_expansion(unit[:, a] * unit[:, b]) for a in range(3) for b in range(3)],
+            "p2": sum_expansion(1.5 * unit[:, 2] ** 2 - 0.5),
+            "angles": (structure.angle_histogram(axes, bins)[1].astype(np.int64) if len(axes)
+                       else np.zeros(bins, dtype=np.int64))}
+
+
+def count_part(whole, own, settled, skip) -> dict:
+    """A part's counts: spheres, events, the most steps, hanging particles, particles on the floor, the spheres
+    timed (the particles from ``skip`` on) and the clock (``settled``: the particles' state, event counts and
+    steps, and the clocked seconds)."""
+    events = np.asarray(settled.event_counts, dtype=np.int64).reshape(-1, len(sdbd.EVENT_KINDS))
+    floor = particles_on_floor(SimpleNamespace(positions=own.positions, radii=own.radii,
+                                               particle=own.row_of_sphere()), whole.contact_tolerance())
+    return {"spheres": len(own.radii), "events": events.sum(axis=0), "steps": int(np.max(settled.steps, initial=0)),
+            "hanging": int(np.isin(settled.state, HANGING).sum()), "on_floor": floor,
+            "timed_spheres": int(np.sum(np.repeat(own.index, own.count) >= skip)),
+            "clocked_seconds": settled.clocked_seconds}
+
+
+def combine(whole, parts) -> dict:
+    """The statistics of the whole sediment from the parts' sums (in the parts' order: the same on every rank;
+    integers are summed exactly, floats that steer or need it as exact sums)."""
+
+    def total(key):
+        return np.sum(np.stack([np.asarray(part[key]) for part in parts]), axis=0)
+
+    def exact(key):
+        return np.array([exact_sum(*(part[key][k] for part in parts)) for k in range(len(parts[0][key]))])
+
+    n = whole.n_particles
+    events = total("events")
+    clocked = parts[0]["clocked_seconds"]  # a spread sediment's clock is its first rank's
+    statistics = {
+        "filling_height": whole.heights.filling,
+        "substrate_height": whole.heights.substrate,
+        "bulk_wall_distance": whole.region.wall_distance,
+        **_packing(whole, parts),
+        **mixture(whole),
+        **_orientations(parts, total, exact),
+        "radial_distribution": _radial_distribution(whole, total),
+        **_contacts(total, exact),
+        "n_spheres": int(total("spheres")),
+        "events_per_particle": int(events.sum()) / n,
+        "largest_steps_per_particle": int(max(part["steps"] for part in parts)),
+        "hanging_particles": int(total("hanging")),
+        "particles_on_floor": int(total("on_floor")),
+        "spheres_per_second": int(total("timed_spheres")) / clocked if clocked > 0 else np.nan,
+    }
+    for name, kind in EVENT_TOTALS.items():
+        statistics[name] = int(events[sdbd.EVENT_KINDS.index(kind)])
+    return statistics
+
+
+def _packing(whole, parts) -> dict:
+    """Bulk packing fraction and the profiles phi(z), phi_s(z) from the parts' covered volumes."""
+    region = whole.region
+    bins, n_species = whole.params["profile_bins"], len(whole.species)
     if not region.measured:
         return {"bulk_packing_fraction": np.nan, "packing_profile": np.full(bins, np.nan),
                 "species_packing_profile": np.full((n_species, bins), np.nan)}
-    edges = np.linspace(0.0, PROFILE_TOP * heights.filling, bins + 1)
-    slab = heights.bulk_slab()
-    # in a periodic box the bulk is a slab of the whole box: measured in the same pass as the profile
-    slabs = [slab, *zip(edges[:-1], edges[1:])] if region.periodic else list(zip(edges[:-1], edges[1:]))
-
-    def profile(x, r, flags):
-        return packing_fractions(x, r, region.lower, region.upper, slabs, samples=params["packing_samples"],
-                                 overlapping=flags) / region.inside_fraction
-
-    everything = profile(positions, radii, overlapping)
-    bulk = (float(everything[0]) if region.periodic else
-            _bulk_packing_fraction(positions[sphere_in_area], radii[sphere_in_area], region, slab,
-                                   params["packing_samples"], overlapping[sphere_in_area]))
-    if n_species == 1 and len(positions) == len(result.positions):  # one species, no substrate: phi_s = phi
-        return {"bulk_packing_fraction": bulk, "packing_profile": everything[-bins:],
-                "species_packing_profile": everything[None, -bins:]}
-    sphere_species = drops.species[result.particle]
-    deposited_overlapping = overlapping[len(positions) - len(result.positions):]  # after the substrate's spheres
-    per_species = np.zeros((n_species, bins))
-    for s in range(n_species):
-        mine = sphere_species == s
-        if mine.any():
-            per_species[s] = profile(result.positions[mine], result.radii[mine], deposited_overlapping[mine])[-bins:]
-    return {"bulk_packing_fraction": bulk, "packing_profile": everything[-bins:],
-            "species_packing_profile": per_species}
-
-
-def _bulk_packing_fraction(positions, radii, region, slab, samples, overlapping) -> float:
-    """Packing fraction of the bulk of a walled container, box or cylinder (NaN when it has no room).
-
-    The estimator: the spheres given (those of the particles whose centre of mass lies in the bulk's
-    area, and the substrate spheres whose centre does), each with its exact volume in the slab (its
-    whole horizontal extent; overlaps within a particle counted once), over the bulk's area times
-    the slab's thickness. A sphere straddling the area's edge counts whole or not at all; for a
-    packing that is statistically uniform across the area the estimate is unbiased (the selected
-    centres are as dense as all centres: Campbell's theorem). The sum over the container's box, in
-    which every sphere lies, so that the kernel's periodic sides never wrap a sphere. ``overlapping``
-    flags the spheres that may overlap others."""
-    area = region.bulk_area()
-    if not area > 0.0:
-        return np.nan
-    if not len(radii):
-        return 0.0
+    volumes = np.sum(np.stack([part["packing"] for part in parts]), axis=0)
+    profile = whole.profile_slabs()
+    slab = whole.heights.bulk_slab()
     box_area = float(np.prod(region.upper - region.lower))
-    return (packing_fraction(positions, radii, region.lower, region.upper, *slab, samples, overlapping)
-            * box_area / area)
+    layers = box_area * (profile[:, 1] - profile[:, 0]) * region.inside_fraction
+    thickness = slab[1] - slab[0]
+    if region.periodic:
+        fraction = volumes[0] / (box_area * thickness) / region.inside_fraction
+    else:
+        # the spheres of the particles in the bulk's area, each with its whole horizontal extent, over that
+        # area: unbiased for a packing statistically uniform across it (the selected centres are as dense as
+        # all centres: Campbell's theorem)
+        fraction = volumes[0] / (region.bulk_area() * thickness) if region.bulk_area() > 0.0 else np.nan
+    return {"bulk_packing_fraction": float(fraction), "packing_profile": volumes[1:bins + 1] / layers,
+            "species_packing_profile": volumes[bins + 1:].reshape(n_species, bins) / layers}
 
 
-def mixture(result, species, drops, volume, heights) -> dict:
+def mixture(whole) -> dict:
     """Each species' count, volume share and mean height in the deposit, the segregation index, and the
-    volumes of the species' particles and of the mesh fits."""
-    count = np.bincount(drops.species, minlength=len(species))
-    species_volume = np.bincount(drops.species, weights=volume, minlength=len(species))
-    weighted_z = np.bincount(drops.species, weights=volume * result.center_of_mass[:, 2], minlength=len(species))
+    volumes of the species' particles and of the mesh fits (from the whole's exact species sums)."""
+    count, volume, moment = whole.species_count, whole.species_volume, whole.species_moment
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean_height = heights.in_deposit(weighted_z / species_volume)
+        mean_height = whole.heights.in_deposit(moment / volume)
     present = mean_height[count > 0]
-    errors = [_mesh_error(s) for s in species]
+    errors = [_mesh_error(s) for s in whole.species]
     return {
-        "species_particles": count,
-        "species_volume_share": species_volume / species_volume.sum(),
+        "species_particles": count.astype(np.int64),
+        "species_volume_share": volume / exact_sum(volume),
         "species_mean_height": mean_height,
         "segregation_index": 2.0 * float(present.max() - present.min()) if len(present) > 1 else 0.0,
-        "species_volume": np.array([s.volume for s in species]),
+        "species_volume": np.array([s.volume for s in whole.species]),
         "species_mesh_volume": np.array([mesh_volume(s.params) if s.params["shape"] == "mesh" else np.nan
-                                         for s in species]),
+                                         for s in whole.species]),
         "species_mesh_volume_error": np.array([e[0] for e in errors]),
         "species_mesh_surface_distance": np.array([e[1] for e in errors]),
     }
@@ -386,15 +640,17 @@ def _mesh_error(s) -> tuple[float, float]:
     return float(error.volume_error), float(error.relative_surface_distance)
 
 
-def _orientations(params, result, species, drops, in_bulk) -> dict:
-    """Orientation order and the distribution of the angle to the vertical of the bulk particles' long axes."""
-    axes = long_axes(result, species, drops)[in_bulk]
-    axes = axes[np.all(np.isfinite(axes), axis=1)]
-    bins = params["orientation_bins"]
-    if not len(axes):
-        return {"nematic_order": np.nan, "vertical_order": np.nan, "orientation_density": np.full(bins, np.nan)}
-    return {"nematic_order": structure.nematic_order(axes)[0], "vertical_order": structure.vertical_order(axes),
-            "orientation_density": structure.angle_distribution(axes, bins)[1]}
+def _orientations(parts, total, exact) -> dict:
+    """Nematic order, <P2> and the density of the angle to the vertical of the bulk particles' long axes (the
+    density from the summed histogram as numpy's histogram makes it)."""
+    n = int(total("axes"))
+    angles = total("angles")
+    if not n:
+        return {"nematic_order": np.nan, "vertical_order": np.nan, "orientation_density": np.full(len(angles), np.nan)}
+    order = np.linalg.eigh(structure.order_tensor(exact("moment").reshape(3, 3), n))[0][-1]
+    width = np.diff(np.linspace(0.0, 0.5 * np.pi, len(angles) + 1))
+    return {"nematic_order": float(order), "vertical_order": exact_sum(*(part["p2"] for part in parts)) / n,
+            "orientation_density": angles / width / n}
 
 
 def rdf_shells(params, diameter, region):
@@ -408,42 +664,27 @@ def rdf_shells(params, diameter, region):
     return (usable, usable * width) if usable > 0 and region.bulk_area() > 0.0 else None
 
 
-def _radial_distribution(params, centres, diameter, region, slab) -> np.ndarray:
-    """g(r) of the bulk's centres of mass on the job's shells (r over the mean volume-equivalent
-    ``diameter``); references lie at least r_max inside the bulk. Shells beyond half a periodic box's
-    width (minimum images) are NaN, and all are when the container has no room for a bulk."""
-    g = np.full(params["rdf_bins"], np.nan)
-    shells = rdf_shells(params, diameter, region)
-    if shells is not None:
-        usable, r_max = shells
-        z = centres[:, 2]
-        in_bulk = (z >= slab[0]) & (z < slab[1]) & region.in_bulk_area(centres[:, :2])
-        reference = np.flatnonzero((z >= slab[0] + r_max) & (z < slab[1] - r_max)
-                                   & region.in_bulk_area(centres[:, :2], r_max))
-        g[:usable] = structure.region_radial_distribution(centres, in_bulk, region.bulk_area() * (slab[1] - slab[0]),
-                                                          reference, r_max, usable, region.lower, region.upper,
-                                                          region.periodic, max_references=RDF_REFERENCES)[1]
+def _radial_distribution(whole, total) -> np.ndarray:
+    """g(r) on the job's shells from the parts' pair counts about their references, with the bulk's density
+    (:func:`parsim.core.structure.shell_density`); NaN beyond the usable shells and without references."""
+    g = np.full(whole.params["rdf_bins"], np.nan)
+    shells = whole.shells()
+    references = int(total("references"))
+    if shells is not None and references:
+        slab = whole.heights.bulk_slab()
+        g[:shells[0]] = structure.shell_density(total("shell_counts"), references, whole.n_bulk,
+                                                whole.region.bulk_area() * (slab[1] - slab[0]), shells[1])
     return g
 
 
-def _contacts(positions, radii, particle, region, in_bulk, network=None) -> dict:
-    """Coordination, contact numbers and fabric of the bulk particles, from one search of the
-    sphere contacts between particles (periodic only across the sides of a periodic box): ``network``,
-    the search :func:`measure` made, or a new one. ``particle`` numbers the substrate's spheres
-    ``len(in_bulk)``."""
-    if network is None:
-        network = structure.contact_network(positions, radii, particle, region.lower, region.upper, region.periodic)
-    pairs, normals = network.pairs, network.normals
-    n = len(in_bulk)
-    sphere_contacts = structure.sphere_contacts_per_particle(pairs, particle, n + 1)[:n]
-    touched = structure.contacts_per_particle(pairs, particle, n + 1)[:n]
-    bulk = np.append(in_bulk, False)  # the substrate is never in the bulk
-    with_bulk = bulk[particle[pairs[:, 0]]] | bulk[particle[pairs[:, 1]]]
-    count = int(in_bulk.sum())
-    return {"bulk_coordination": float(sphere_contacts[in_bulk].mean()) if count else np.nan,
-            "n_bulk_particles": count,
-            "contact_number_fraction": structure.contact_number_distribution(touched, in_bulk, MAX_CONTACT_NUMBER),
-            "fabric_tensor": structure.fabric_tensor(normals[with_bulk])}
+def _contacts(total, exact) -> dict:
+    """Coordination, contact numbers and fabric of the bulk particles from the parts' sums."""
+    bulk, contacts = int(total("bulk")), int(total("fabric_contacts"))
+    cap = MAX_CONTACT_NUMBER
+    return {"bulk_coordination": int(total("sphere_contacts")) / bulk if bulk else np.nan,
+            "n_bulk_particles": bulk,
+            "contact_number_fraction": total("contact_numbers") / bulk if bulk else np.full(cap + 1, np.nan),
+            "fabric_tensor": exact("fabric").reshape(3, 3) / contacts if contacts else np.full((3, 3), np.nan)}
 
 
 def particles_on_floor(result, tolerance) -> int:

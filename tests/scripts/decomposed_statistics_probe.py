@@ -9,7 +9,8 @@ then takes the gathered share and the same inputs (the ranks' drops joined in pa
 exactly what a task measured on one rank takes. The cases: spheres in a periodic box, a mixture of
 rods and smaller spheres between walls, overlapping rods in a cylinder, a heap, spheres of several
 sizes on a substrate, and spheres on a substrate settled by rank 0 alone (the other ranks hold no
-particle).
+particle); and a lattice of touching spheres cut into blocks by hand (not deposited), whose contact
+distance is an edge of g(r)'s shells.
 """
 
 import json
@@ -24,7 +25,7 @@ from mpi4py import MPI
 import parsim
 import parsim.parallel.deposition as decomposition
 import parsim.parallel.deposition_statistics as decomposed_statistics
-from parsim.core import structure
+from parsim.core import sdbd, structure
 from parsim.solvers import deposition as solver
 from parsim.solvers import deposition_statistics as statistics
 from parsim.solvers.deposition_materials import Drops
@@ -45,8 +46,10 @@ def cases(folder: Path) -> dict:
                               {"halo": 2.0, "references": 37, "index_block": 64}),
         "rods and spheres, walls": ({"n_particles": 700, "box_length": 12.0, "lateral": "walls"}, rods_and_spheres,
                                     {"halo": 2.5}),
-        "overlapping rods, cylinder": ({"n_particles": 450, "shape": "rod", "shape_size": 3, "container": "cylinder",
-                                        "container_radius": 6.0, "packing_samples": 50_000}, None, {"halo": 2.5}),
+        # spheres 0.6 radii apart: three overlap, the packing fraction's excess is partly sampled
+        "overlapping rods, cylinder": ({"n_particles": 450, "shape": "rod", "shape_size": 3, "shape_spacing": 0.6,
+                                        "container": "cylinder", "container_radius": 6.0, "packing_samples": 50_000},
+                                       None, {"halo": 2.5}),
         "heap": ({"n_particles": 600, "lateral": "none", "drop_radius": 4.0}, None, {"halo": 1.5}),
         # a halo wider than the blocks: rank 0 settles the whole task, the other ranks hold no particle
         "substrate, rank 0 alone": ({"n_particles": 400, "box_length": 10.0,
@@ -154,6 +157,60 @@ def run_case(comm, params, options) -> dict | None:
     }
 
 
+LATTICE = "touching lattice, periodic"
+
+
+def lattice_share(comm, side=24, layers=12):
+    """This rank's share of spheres of diameter 1 in touching rows along x (a periodic chain across the box of
+    ``side``) stacked on a square lattice of rows in y and z, each row at a random offset in x, so that a
+    centre distance of 1 rounds differently across the box's sides than inside it; the box cut across x into
+    one block per rank: a sediment whose contact distance, 1 diameter, is an edge of g(r)'s shells, and
+    whose ranks' frames are narrower than the box."""
+    offset = np.random.default_rng(3).random((side, layers))
+    i, j, k = np.meshgrid(np.arange(side, dtype=np.float64), np.arange(side), np.arange(layers), indexing="ij")
+    com = np.column_stack([offset[j.ravel(), k.ravel()] + i.ravel(), j.ravel() + 0.5, k.ravel() + 0.5])
+    mine = np.flatnonzero(np.minimum((com[:, 0] / side * comm.size).astype(np.int64), comm.size - 1) == comm.rank)
+    n = len(mine)
+    events = np.zeros((n, len(sdbd.EVENT_KINDS)), dtype=np.int32)
+    rotation = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    return decomposition.DecomposedDeposition(
+        mine.astype(np.int64), np.zeros(n, dtype=np.int64), np.ones(n), com[mine], rotation,
+        np.full(n, 6, dtype=np.int8), np.full(n, sdbd.RESTING_THREE_CONTACTS, dtype=np.int8), events,
+        np.ones(n, dtype=np.int32), np.ones(n, dtype=np.int64), com[mine], np.full(n, 0.5), -1, 1.0, {})
+
+
+def lattice_case(comm) -> dict | None:
+    """``measure_decomposed`` of :func:`lattice_share` against ``measure`` of the gathered lattice."""
+    params = point({"n_particles": 24 * 24 * 12, "box_length": 24.0, "rdf_range": 1.5, "rdf_bins": 30}, None)
+    species = solver.species_of(params)
+    geometry = solver._container(params, species)
+    substrate = solver.substrate_spheres(params)
+    share = lattice_share(comm)
+    drops = Drops(share.particle_shape, share.particle_scale)
+    mine = decomposed_statistics.measure_decomposed(comm, params, share, species, drops, geometry, 0, substrate)
+    whole = share.gather(comm)
+    everyone = comm.gather(mine, root=0)
+    indices = comm.gather(share.index, root=0)
+    if comm.rank != 0:
+        return None
+    serial = statistics.measure(params, whole, species, Drops(np.zeros(len(whole.center_of_mass), dtype=np.int64),
+                                                              np.ones(len(whole.center_of_mass))),
+                                geometry, 0, substrate)
+    owner = np.empty(len(whole.center_of_mass), dtype=np.int64)
+    for rank, index in enumerate(indices):
+        owner[index] = rank
+    return {
+        "particles_per_rank": [len(i) for i in indices],
+        "cross_rank_contacts": cross_rank_contacts(whole, geometry, params, owner),
+        "same_on_every_rank": all(set(other) == set(mine) and all(
+            np.array_equal(np.asarray(other[k]), np.asarray(mine[k]), equal_nan=True) for k in mine)
+            for other in everyone),
+        "missing": sorted(set(serial) - set(mine)), "extra": sorted(set(mine) - set(serial)),
+        "serial": {k: jsonable(v) for k, v in serial.items()},
+        "decomposed": {k: jsonable(v) for k, v in mine.items() if k in serial},
+    }
+
+
 def reference_selections(comm) -> list[bool]:
     """Whether the references that ranks choose together are those the serial estimator chooses: candidates
     drawn at random among particle indices given to the ranks at random, for several numbers of references
@@ -185,6 +242,9 @@ def main(report_path):
         write_substrate(folder / "substrate.csv")
     comm.Barrier()
     report = {"cases": {}, "reference_selections": reference_selections(comm)}
+    lattice = lattice_case(comm)
+    if comm.rank == 0:
+        report["cases"][LATTICE] = lattice
     for name, (parameters, species, options) in cases(folder).items():
         outcome = run_case(comm, point(parameters, species), options)
         if comm.rank == 0:

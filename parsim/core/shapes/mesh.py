@@ -32,7 +32,7 @@ Error measures (:class:`MeshFit`), with r_eq the radius of the sphere of the mes
 volume (the *volume-equivalent radius*):
 
 - ``volume_error``: (V_union - V_mesh) / V_mesh, V_union from
-  :func:`centre_of_mass_of_union` (relative accuracy about 2e-4).  The balls lie inside
+  :func:`centre_of_mass_of_union` (its measured accuracy there).  The balls lie inside
   the mesh, so it is negative up to that accuracy.
 - ``mesh_to_union``: the largest distance to the union from the mesh's vertices and
   ``EVALUATION_FACTOR`` times as many area samples as there are cover samples (another
