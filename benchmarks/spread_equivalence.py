@@ -16,8 +16,9 @@ Each job's inputs are built as ``parsim run`` builds them (the task's random str
 job's seed, :func:`parsim.solvers.deposition.deposition_inputs`); the serial sediment is deposited
 once, then the job runs under ``mpiexec -n K`` with ``deposit_streamed(..., check=True)`` and the
 gathered sediment is compared with the serial one field by field, bitwise (positions, radii,
-particle, center_of_mass, rotation, contacts, state, event_counts, steps, stopped_at), and checked
-for overlaps between spheres of different particles (beyond 1e-9 of the mean sphere radius).
+particle, center_of_mass, rotation, contacts, state, event_counts, steps, stopped_at).  The serial
+sediment is checked for overlaps between spheres of different particles (beyond 1e-9 of the mean
+sphere radius), and so is a spread one that differs from it.
 
 Every failure is recorded and the search goes on: a divergent sediment, an overlap, an exception
 (a DecompositionError of the checks; ``deposit_streamed`` then ends every rank with MPI_Abort), a
@@ -40,9 +41,10 @@ number for each failing job and writes the job, with its input files and the com
 smallest failing number of particles, to ``--found`` (default benchmarks/found); ``--repeat R``
 runs each smaller job up to R times before it counts as passing (some failures do not repeat).
 
-Exits with 1 if a job failed (or the serial deposit refused one).  Input files a job needs
-(agglomerates, substrates, sieve curves, meshes) are written into the work folder (``--work``,
-default a temporary folder, kept when a job failed) and named by absolute path in its TOML.
+Exits with 1 if a job failed (or the serial deposit refused one, or its sediment overlaps).  Input
+files a job needs (agglomerates, substrates, sieve curves, meshes) are written into the work folder
+(``--work``, default a temporary folder, kept when a job failed) and named by absolute path in its
+TOML.
 """
 
 import argparse
@@ -435,8 +437,10 @@ def serial_worker(jobs: list[Path], runs: "Runs", log: Path) -> None:
             _log(log, {"job": path.stem, "outcome": "serial error", "error": f"{type(error).__name__}: {error}"})
             continue
         np.savez(work / "serial" / f"{path.stem}.npz", **{f: getattr(result, f) for f in FIELDS})
-        _log(log, {"job": path.stem, "outcome": "done", "seconds": time.perf_counter() - start,
-                   "particles": len(result.state), "spheres": len(result.radii), "stopped_at": result.stopped_at})
+        overlap = first_overlap(result, task_inputs(path.read_text(), spread=False, particles=runs.particles))
+        _log(log, {"job": path.stem, "outcome": "serial overlap" if overlap else "done", "overlap": overlap,
+                   "seconds": time.perf_counter() - start, "particles": len(result.state),
+                   "spheres": len(result.radii), "stopped_at": result.stopped_at})
 
 
 def spread_worker(jobs: list[Path], runs: "Runs", log: Path) -> None:
@@ -457,7 +461,8 @@ def spread_worker(jobs: list[Path], runs: "Runs", log: Path) -> None:
         if comm.rank == 0:
             with np.load(serial_file) as saved:
                 serial = {f: saved[f] for f in FIELDS}
-            divergence, overlap = first_divergence(serial, whole), first_overlap(whole, inputs)
+            divergence = first_divergence(serial, whole)  # an overlap of the serial sediment is the serial run's
+            overlap = first_overlap(whole, inputs) if divergence else None
             outcome = "divergent" if divergence else "overlap" if overlap else "equal"
             particle = divergence["particle"] if divergence else min(overlap["particles"]) if overlap else None
             _log(log, {"job": path.stem, "outcome": outcome, "particle": particle, "divergence": divergence,
@@ -598,9 +603,10 @@ def summary(jobs: list[Path], serial: dict, spread: dict[int, dict]) -> dict:
 
 
 def print_summary(report: dict) -> None:
-    print(f"{report['jobs']} jobs drawn; {len(report['serial_errors'])} refused by the serial deposit")
+    print(f"{report['jobs']} jobs drawn; {len(report['serial_errors'])} refused by the serial deposit or "
+          f"overlapping in its sediment")
     for job, entry in report["serial_errors"].items():
-        print(f"  {job}: {entry.get('error')}")
+        print(f"  {job}: {_failure_detail(entry)}")
     for ranks, tally in report["ranks"].items():
         print(f"K = {ranks}: {tally['run']} jobs run, {tally['split']} split into blocks, "
               f"{tally['divergent']} divergent, {tally['failed']} failed")

@@ -194,19 +194,6 @@ def grouped(outputs, serial, job_file):
     return run
 
 
-def walled(name: str) -> bool:
-    """Does a point of the shipped job have walls (a walled box or a cylinder)?"""
-    settings = {**SHIPPED[name].get("parameters", {}), **SHIPPED[name].get("sweep", {})}
-    values = [settings.get("lateral"), settings.get("container")]
-    values = [v for value in values for v in (value if isinstance(value, list) else [value])]
-    return "walls" in values or "cylinder" in values
-
-
-SPREAD_STATISTICS_IN_WALLS = pytest.mark.xfail(strict=False, reason=(
-    "in a walled box or a cylinder the statistics of a sediment spread over ranks are not the serial ones "
-    "(packing profiles and bulk packing fraction differ by up to 0.07, the sediments being equal)"))
-
-
 @pytest.mark.mpi
 @pytest.mark.parametrize("name", DEPOSITIONS)
 def test_shipped_deposition_spread_over_two_ranks_is_the_serial_sediment(name, serial, grouped, job_file):
@@ -218,7 +205,6 @@ def test_shipped_deposition_spread_over_two_ranks_is_the_serial_sediment(name, s
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("name", [pytest.param(name, marks=[SPREAD_STATISTICS_IN_WALLS] if walled(name) else [])
-                                  for name in DEPOSITIONS])
+@pytest.mark.parametrize("name", DEPOSITIONS)
 def test_shipped_deposition_spread_over_two_ranks_has_the_serial_statistics(name, serial, grouped, job_file):
     assert_same_statistics(check_dataset(serial(name), job_file(name)), check_dataset(grouped(name), job_file(name)))

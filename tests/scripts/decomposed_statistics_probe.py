@@ -141,6 +141,15 @@ def run_case(comm, params, options) -> dict | None:
         started = time.perf_counter()
         serial = statistics.measure(params, whole, species, joined_drops(drops), geometry, skip, substrate)
         serial_seconds = time.perf_counter() - started
+    outcome = compared(whole, geometry, params, indices, serial, mine, everyone)
+    outcome["seconds"] = {"serial_measure": serial_seconds, "decomposed_measure": kept["seconds"]}
+    return outcome
+
+
+def compared(whole, geometry, params, indices, serial: dict, mine: dict, everyone: list[dict]) -> dict:
+    """What a case reports: rank 0's spread statistics ``mine`` beside the serial ``serial`` of the gathered
+    sediment ``whole``, whether every rank's statistics (``everyone``) are rank 0's, and how the particles
+    (``indices``, per rank) and their contacts fell over the ranks."""
     owner = np.empty(len(whole.center_of_mass), dtype=np.int64)
     for rank, index in enumerate(indices):
         owner[index] = rank
@@ -150,7 +159,6 @@ def run_case(comm, params, options) -> dict | None:
         "same_on_every_rank": all(set(other) == set(mine) and all(
             np.array_equal(np.asarray(other[k]), np.asarray(mine[k]), equal_nan=True) for k in mine)
             for other in everyone),
-        "seconds": {"serial_measure": serial_seconds, "decomposed_measure": kept["seconds"]},
         "missing": sorted(set(serial) - set(mine)), "extra": sorted(set(mine) - set(serial)),
         "serial": {k: jsonable(v) for k, v in serial.items()},
         "decomposed": {k: jsonable(v) for k, v in mine.items() if k in serial},
@@ -196,19 +204,7 @@ def lattice_case(comm) -> dict | None:
     serial = statistics.measure(params, whole, species, Drops(np.zeros(len(whole.center_of_mass), dtype=np.int64),
                                                               np.ones(len(whole.center_of_mass))),
                                 geometry, 0, substrate)
-    owner = np.empty(len(whole.center_of_mass), dtype=np.int64)
-    for rank, index in enumerate(indices):
-        owner[index] = rank
-    return {
-        "particles_per_rank": [len(i) for i in indices],
-        "cross_rank_contacts": cross_rank_contacts(whole, geometry, params, owner),
-        "same_on_every_rank": all(set(other) == set(mine) and all(
-            np.array_equal(np.asarray(other[k]), np.asarray(mine[k]), equal_nan=True) for k in mine)
-            for other in everyone),
-        "missing": sorted(set(serial) - set(mine)), "extra": sorted(set(mine) - set(serial)),
-        "serial": {k: jsonable(v) for k, v in serial.items()},
-        "decomposed": {k: jsonable(v) for k, v in mine.items() if k in serial},
-    }
+    return compared(whole, geometry, params, indices, serial, mine, everyone)
 
 
 def reference_selections(comm) -> list[bool]:

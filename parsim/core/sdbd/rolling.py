@@ -7,7 +7,8 @@ rotation, each an angle ``phi`` about the axis, are
 * the end of the arc: hanging (eqs. 18, 32), the centre of mass at the lowest point of its
   circle, or, if that is farther, the end of an angular chunk in which no sphere moves more
   than ``CHUNK_CELLS`` grid cells (a bookkeeping step, not an event, so that every grid
-  query covers only the cells within reach of the arc of one sphere);
+  query covers only the cells within reach of the arc of one sphere), and in a periodic box
+  less than the side less two cells (see below);
 * loss of a pivot contact (:func:`_loss_events`): its moving sphere comes level with its
   sediment sphere (eq. 17; on two pivots only if then the other one is level or below,
   3.3.4);
@@ -22,6 +23,14 @@ The earliest event and those within ``SIMULTANEOUS_TOL`` of arc length of it are
 together (4.3): the particle turns by eq. 15 and the pivots and the contacts made are its new
 contacts.  Rolling on one and on two pivots share this search; only the loss condition and the
 release events tell them apart.
+
+Periodic images.  A sphere's new contacts are looked for among the obstacles within reach of
+the region its arc sweeps (the arc's bounding box grown by the sphere's radius and the largest
+sediment radius).  In a periodic box each obstacle is taken at its image nearest the centre of
+that region, not nearest the sphere's starting point: an arc that carries the sphere across a
+good part of the box meets, at its far end, an image that is not the one nearest where it
+started.  The chunk keeps the region narrower than the box (the arc less than the side less two
+cells, a cell bounding every diameter), so that at most one image of each obstacle lies in it.
 """
 
 import math
@@ -75,7 +84,7 @@ from parsim.core.sdbd.events import (
     sliding_wall_release_plane,
 )
 from parsim.core.sdbd.frustration import decision_changes
-from parsim.core.sdbd.grid import grid_collect, periodic_image
+from parsim.core.sdbd.grid import grid_collect
 from parsim.core.sdbd.particle import rotate_particle
 from parsim.core.sdbd.polygon import candidate_sides, side_gap_in_box, side_plane
 from parsim.core.sdbd.reads import note
@@ -104,7 +113,7 @@ def roll(n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_c
         axis[q] = scratch.decision[q]
         pivot[q] = scratch.decision[3 + q]
     n_pivots, n_dr = _pivots_and_released(motion, k, m, n_c, work)
-    n_t, best, tol_phi = _end_of_arc(n, particle, axis, pivot, settings.ell, grid.geom[6], window)
+    n_t, best, tol_phi = _end_of_arc(n, particle, axis, pivot, settings.ell, grid.geom, grid.igeom, window)
     n_t, best = _loss_events(n_pivots, k, m, work, axis, pivot, settings.ell, n_t, best, tol_phi)
     if n_pivots == 2:
         n_t, best = _release_events(particle.com, k, m, work, axis, pivot, settings, n_t, best, tol_phi)
@@ -146,11 +155,13 @@ def _pivots_and_released(motion, k, m, n_c, work):
 
 
 @jit(inline="always")
-def _end_of_arc(n, particle, axis, pivot, ell, cell, window):
+def _end_of_arc(n, particle, axis, pivot, ell, geom, igeom, window):
     """Start the event window with hanging (eqs. 18, 32) or, if that lies beyond it, the end
     of the angular chunk.  Returns ``(n_t, best, tol_phi)``, ``tol_phi`` the angle of
     ``SIMULTANEOUS_TOL`` of arc length on the sphere farthest from the axis; a chunk is
-    ``CHUNK_CELLS`` grid cells of arc on that sphere."""
+    ``CHUNK_CELLS`` grid cells of arc on that sphere, and in a periodic box less than
+    :func:`_periodic_arc`."""
+    cell = geom[6]
     pos = particle.centre
     phi_hang, c_hang, s_hang = hang_cos_sin(particle.com, pivot, axis)
     rho_max = 0.0
@@ -166,7 +177,10 @@ def _end_of_arc(n, particle, axis, pivot, ell, cell, window):
     if rho_max < ell:
         rho_max = ell
     tol_phi = SIMULTANEOUS_TOL * ell / rho_max
-    phi_lim = CHUNK_CELLS * cell / rho_max
+    arc = CHUNK_CELLS * cell
+    if igeom[0] == LATERAL_PERIODIC:
+        arc = min(arc, _periodic_arc(geom))
+    phi_lim = arc / rho_max
     if phi_lim > math.pi:
         phi_lim = math.pi
     n_t = 0
@@ -178,6 +192,16 @@ def _end_of_arc(n, particle, axis, pivot, ell, cell, window):
         n_t, best = push_event(n_t, best, tol_phi, phi_lim, math.cos(phi_lim), math.sin(phi_lim),
                                EV_CHUNK, -1, -1, -1, 0.0, 0.0, window)
     return n_t, best, tol_phi
+
+
+@jit(inline="always")
+def _periodic_arc(geom):
+    """The longest arc of a chunk in the periodic box of ``geom``: the region a sphere's arc
+    sweeps, grown on each side by the sphere's radius and half a cell (together at most a cell),
+    stays narrower than the box's shorter side, so that it holds at most one image of each
+    obstacle.  Positive: the box is wider than four times the largest radius, two cells."""
+    side = min(geom[2], geom[3])
+    return (side - 2.0 * geom[6]) * (1.0 - 1e-9)
 
 
 @jit(inline="always")
@@ -321,6 +345,10 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
         xlo, xhi = arc_range(rho, e1[0], e2[0], lim, cos_lim, sin_lim)
         ylo, yhi = arc_range(rho, e1[1], e2[1], lim, cos_lim, sin_lim)
         zlo, zhi = arc_range(rho, e1[2], e2[2], lim, cos_lim, sin_lim)
+        # the middle of the swept region, relative to the sphere: obstacles are taken at their
+        # image nearest it (see the module docs)
+        mid_x = o0 + 0.5 * (xlo + xhi) - pos[i, 0]
+        mid_y = o1 + 0.5 * (ylo + yhi) - pos[i, 1]
         ri = rad[i]
         # floor
         if o2 + zlo - ri <= TOUCH_TOL * ell:
@@ -379,7 +407,7 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
             j = buf[qq]
             rx = sed[j, 0] - pos[i, 0]
             ry = sed[j, 1] - pos[i, 1]
-            mx, my = periodic_image(periodic, length_x, length_y, rx, ry)
+            mx, my = _image_near(periodic, length_x, length_y, rx, ry, mid_x, mid_y)
             # obstacle relative to the pivot
             q0 = pos[i, 0] + mx - pivot[0]
             q1 = pos[i, 1] + my - pivot[1]
@@ -409,6 +437,23 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
                 n_t, best = push_event(n_t, best, tol_phi, phi, cc, ss, EV_CONTACT, i, OB_SPHERE, j,
                                        mx - rx, my - ry, window)
     return n_t, best, buf
+
+
+@jit(inline="always")
+def _image_near(periodic, length_x, length_y, rx, ry, mid_x, mid_y):
+    """The lateral difference ``rx, ry`` from a sphere to an obstacle, taken to the obstacle's
+    image nearest the point ``mid_x, mid_y`` (relative to the sphere) in a periodic box.  The
+    difference less whole periods, ``r - L floor((r - mid) / L + 1/2)``, so that where that image
+    is also the one nearest the sphere the result is bitwise :func:`.grid.periodic_image`'s; a
+    difference within a quarter of the side of ``mid`` needs no division."""
+    if periodic:
+        dx = rx - mid_x
+        if abs(dx) >= 0.25 * length_x:
+            rx -= length_x * math.floor(dx / length_x + 0.5)
+        dy = ry - mid_y
+        if abs(dy) >= 0.25 * length_y:
+            ry -= length_y * math.floor(dy / length_y + 0.5)
+    return rx, ry
 
 
 @jit(inline="always")
