@@ -33,6 +33,17 @@ def written_atomically(path: Path):
             pass  # the folder itself is gone or unreadable: the error above says so
 
 
+@contextmanager
+def opened_atomically(path: Path):
+    """Yield a binary file open for writing that becomes ``path`` only if the block succeeds, as
+    :func:`written_atomically`; it is on the disk (flushed, fsynced) before it is renamed."""
+    with written_atomically(path) as temporary:
+        with open(temporary, "wb") as file:
+            yield file
+            file.flush()
+            os.fsync(file.fileno())
+
+
 def write_bytes_atomically(path: Path, data: bytes | memoryview) -> None:
     """Write ``data`` to ``path`` atomically, as :func:`written_atomically`.
 
@@ -40,8 +51,5 @@ def write_bytes_atomically(path: Path, data: bytes | memoryview) -> None:
     this function, so that a full disk is reported by the operating system's
     own error, never half-way through the library's writes.
     """
-    with written_atomically(path) as temporary:
-        with open(temporary, "wb") as file:
-            file.write(data)
-            file.flush()
-            os.fsync(file.fileno())
+    with opened_atomically(path) as file:
+        file.write(data)

@@ -39,7 +39,7 @@ import numpy as np
 import parsim
 from parsim.errors import JobError, OutputError
 from parsim.output.atomic import written_atomically
-from parsim.output.voxels import write_voxels
+from parsim.output.voxels import image_grid, write_voxels
 
 EXPORT_FOLDER = "export"
 REAL = "%.17g"
@@ -315,10 +315,7 @@ def write_particles(task: TaskSpheres, path: Path) -> list[Path]:
     particle is at centre + R(q) · scale · (dx, dy, dz) with radius scale · r: what a
     multi-sphere DEM code (clump templates, LIGGGHTS multisphere, LAMMPS molecule files) needs.
     """
-    if task.kind != "deposition":
-        raise JobError(f"format 'particles' is the particle table of a deposition, and {task.label} is an "
-                       f"{task.kind} task; its clusters have no orientation: use one of "
-                       f"{', '.join(name for name in FORMATS if name != 'particles')}")
+    check_particle_table(task)
     arrays = task.arrays
     templates = shape_templates(task)
     names = [str(name) for name in task.attrs.get("shape_names", [])]
@@ -334,15 +331,26 @@ def write_particles(task: TaskSpheres, path: Path) -> list[Path]:
     return _write_text(path, table) + _write_text(shapes_path, shapes)
 
 
+def check_particle_table(task: TaskSpheres) -> None:
+    """Refuse a task that has no particle table: an aggregation, whose clusters have no orientation."""
+    if task.kind != "deposition":
+        raise JobError(f"format 'particles' is the particle table of a deposition, and {task.label} is an "
+                       f"{task.kind} task; its clusters have no orientation: use one of "
+                       f"{', '.join(name for name in FORMATS if name != 'particles')}")
+
+
 @dataclass(frozen=True)
 class Format:
-    """One export format: the file suffix, its writer and what reads it (for the help)."""
+    """One export format: the file suffix, its writer and what reads it (for the help); ``check``
+    refuses a task the writer would refuse (a JobError), called on every task before any folder
+    or file is made, so that a refused export makes nothing."""
 
     suffix: str
     write: Callable[[TaskSpheres, Path], list[Path]]
     readers: str
     collect: Callable[[list[Path], Path], list[Path]] | None = None
     collection_suffix: str = ""
+    check: Callable[[TaskSpheres], object] | None = None
 
 
 FORMATS: dict[str, Format] = {
@@ -351,9 +359,10 @@ FORMATS: dict[str, Format] = {
     "vtk": Format(".vtp", write_vtk, "ParaView", collect=write_vtk_collection, collection_suffix=".pvd"),
     "csv": Format(".csv", write_csv, "parsim agglomerate_file, spreadsheets"),
     "yade": Format(".txt", write_yade, "YADE ymport.textExt, ymport.textClumps"),
-    "particles": Format("_particles.csv", write_particles, "multi-sphere DEM codes, deposition only"),
+    "particles": Format("_particles.csv", write_particles, "multi-sphere DEM codes, deposition only",
+                        check=check_particle_table),
     "voxels": Format("_voxels.npy", write_voxels, "porespy, OpenPNM (numpy); image tools (.raw + .json, .tif); "
-                     "3-D tasks, with --voxel-size"),
+                     "3-D tasks, with --voxel-size", check=image_grid),
 }
 
 
@@ -379,20 +388,25 @@ def export_output(output: Path, format: str, task: str | None = None, all_tasks:
     in (an existing folder, a path ending in a slash, or a name without a suffix; created if need
     be); for every task, the folder (both default to OUTPUT/export).  A ``vtk`` export of every
     task also writes JOB.pvd, the collection ParaView opens as one series.  ``voxel_size`` and
-    ``height`` are those of format ``voxels`` (:mod:`parsim.output.voxels`).
+    ``height`` are those of format ``voxels`` (:mod:`parsim.output.voxels`).  Every task is checked
+    (the format's ``check``) before the folder is created: a refusal makes nothing.
     """
     if format not in FORMATS:
         raise JobError(f"unknown export format {format!r}; allowed: {', '.join(FORMATS)}")
     spec = FORMATS[format]
     options = {name: value for name, value in (("voxel_size", voxel_size), ("height", height)) if value is not None}
     if format == "voxels":
-        spec = replace(spec, write=functools.partial(spec.write, **options))
+        spec = replace(spec, write=functools.partial(spec.write, **options),
+                       check=functools.partial(spec.check, **options))
     elif options:
         raise JobError(f"--voxel-size and --height are options of format 'voxels', not {format!r}")
     output = Path(output)
     job_name, files = _job_folder(output)
     if all_tasks:
         folder = Path(out) if out is not None else output / EXPORT_FOLDER
+        if spec.check is not None:  # each task is read again to be written: only one is held at a time
+            for file in files:
+                spec.check(read_task(file))
         _make_folder(folder)
         written = []
         for file in files:
@@ -411,8 +425,11 @@ def export_output(output: Path, format: str, task: str | None = None, all_tasks:
     target = Path(out) if out is not None else output / EXPORT_FOLDER
     if out is None or _names_folder(out):
         target = target / f"{chosen.stem}{spec.suffix}"
+    chosen_task = read_task(chosen)
+    if spec.check is not None:
+        spec.check(chosen_task)
     _make_folder(target.parent)
-    return spec.write(read_task(chosen), target)
+    return spec.write(chosen_task, target)
 
 
 def _names_folder(out) -> bool:
