@@ -45,10 +45,13 @@ DURATION = re.compile(r"(?:(?P<days>\d+)-)?(?P<hours>\d+):(?P<minutes>\d\d):(?P<
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse's parser whose usage errors are one line, as parsim's other errors."""
+    """argparse's parser whose usage errors are one line, as parsim's other errors: under mpiexec every
+    rank meets the error before MPI starts, and the launcher's rank 0 alone prints it."""
 
     def error(self, message: str):
-        self.exit(EXIT_USER_ERROR, f"parsim: error: {message} (see {self.prog} --help)\n")
+        from parsim.parallel.launcher import speaks_for_all  # nothing but os: no MPI yet
+
+        self.exit(EXIT_USER_ERROR, f"parsim: error: {message} (see {self.prog} --help)\n" if speaks_for_all() else None)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -10,7 +10,10 @@ are kept) and ends the process with the shell's status for that signal,
 write left behind is a temporary that the next run removes.
 
 Under ``mpiexec``, Ctrl-C reaches every rank: rank 0 prints the line and exits,
-and the launcher ends the other ranks.
+and the launcher ends the other ranks.  MPICH's ``mpiexec`` forwards SIGINT and
+SIGTERM but not SIGHUP: it ends at once and its proxies kill the ranks, each in a
+session of its own and so never signalled, with nothing a rank can catch; the next
+run takes over the lock its rank 0 left (:mod:`parsim.output.lock`: the holder is gone).
 """
 
 import os

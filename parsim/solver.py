@@ -8,6 +8,7 @@ Every solver in :mod:`parsim.solvers` is a :class:`Solver`; adding one needs no
 change to the scheduler, the output or the command line.
 """
 
+import itertools
 import re
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
@@ -54,6 +55,25 @@ def flag_word(value: str) -> str:
     """``value`` as one word of a CF ``flag_meanings``: letters, digits and ``_-.+@``, the other
     characters replaced by ``_`` (a mesh file's path, say)."""
     return re.sub(r"[^A-Za-z0-9_.+@-]", "_", str(value)) or "_"
+
+
+def flag_words(values) -> tuple[str, ...]:
+    """Distinct ``values`` as distinct words of a CF ``flag_meanings``, in their order.
+
+    Each is its :func:`flag_word`.  Values that share one (``a/b`` and ``a_b``) are told apart: a
+    value that is that word already keeps it, else the first of them does, and the others take it
+    with ``@2``, ``@3``, ... added, the lowest that is no value's own word nor taken before.  The
+    words depend on the values and their order alone, so a job's dataset names them alike every run."""
+    own = [flag_word(value) for value in values]
+    exact = {word for value, word in zip(values, own) if word == str(value)}
+    unavailable = set(own)
+    words = []
+    for value, word in zip(values, own):
+        if word in words or (word in exact and word != str(value)):
+            word = next(f"{word}@{n}" for n in itertools.count(2) if f"{word}@{n}" not in unavailable)
+        words.append(word)
+        unavailable.add(word)
+    return tuple(words)
 
 
 def named_values(coordinate) -> list:

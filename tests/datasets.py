@@ -1,7 +1,10 @@
 """Comparing job outputs between runs."""
 
+import hashlib
+import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import h5py
@@ -9,7 +12,7 @@ import numpy as np
 import xarray as xr
 
 from parsim.job import parse_job
-from parsim.output.dataset import MEASURED_ATTRIBUTE, VOLATILE_ATTRIBUTES, row_layout
+from parsim.output.dataset import MEASURED_ATTRIBUTE, VOLATILE_ATTRIBUTES, all_statistics, build_dataset, row_layout
 from parsim.output.rows import read_rows, row_files
 from parsim.solvers import SOLVERS
 from tests.mpi import parsim_command
@@ -80,3 +83,16 @@ def unfinish(out: Path, tasks: list[tuple[int, int]]) -> None:
     for task in job.tasks():
         if (task.point, task.realization) in tasks:
             (out / "tasks" / f"{task.label}.h5").unlink(missing_ok=True)
+
+
+def swept_mesh_files_dataset(paths: list[str]) -> xr.Dataset:
+    """The dataset of a deposition job sweeping ``mesh_file`` over ``paths``, built from rows of zeros
+    without running it; the files need not exist (each one's content digest is that of its path)."""
+    text = (f'name = "meshes"\nkind = "deposition"\nseed = 1\nrealizations = 1\n[parameters]\nshape = "mesh"\n'
+            f'n_particles = 10\nbox_length = 5.0\n[sweep]\nmesh_file = {json.dumps(paths)}\n')
+    job = parse_job(text, SOLVERS, verify=False)
+    job = replace(job, input_hashes={"mesh_file": {path: hashlib.sha256(path.encode()).hexdigest() for path in paths}})
+    observable = job.solver.coordinates(job.constants)
+    zeros = {s.name: np.zeros([len(observable[d].values) for d in s.dims]) for s in all_statistics(job.solver)}
+    rows = row_layout(job, job.solver).rows([(task, zeros) for task in job.tasks()])
+    return build_dataset(job, job.solver, rows, mpi_size=1, ranks_per_task=1)

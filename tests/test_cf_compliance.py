@@ -27,7 +27,7 @@ from parsim.output.dataset import REFERENCES, all_statistics, build_dataset, row
 from parsim.output.snapshot import OUTPUT_SCHEMA  # noqa: E402
 from parsim.solver import flag_value, resolve_units  # noqa: E402
 from parsim.solvers import SOLVERS  # noqa: E402
-from tests.datasets import run_serial  # noqa: E402
+from tests.datasets import run_serial, swept_mesh_files_dataset  # noqa: E402
 
 CF = "cf:1.10"
 QUICKSTART = Path(__file__).resolve().parent.parent / "jobs" / "quickstart.toml"
@@ -114,6 +114,15 @@ def string_sweep(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
+def colliding_paths(tmp_path_factory) -> Path:
+    """A sweep of paths whose CF words would be one (``a/b.stl``, ``a_b.stl``; ``é.stl``, ``ü.stl``): the
+    words that tell them apart are CF words too."""
+    path = tmp_path_factory.mktemp("colliding_paths") / "meshes.nc"
+    swept_mesh_files_dataset(["a/b.stl", "a_b.stl", "é.stl", "ü.stl"]).to_netcdf(path, engine="netcdf4")
+    return path
+
+
+@pytest.fixture(scope="module")
 def partial(quickstart) -> Path:
     """The partial dataset of the small quick start (``parsim collect``): every statistic may have
     missing tasks there, its integer ones included."""
@@ -123,7 +132,7 @@ def partial(quickstart) -> Path:
     return path
 
 
-@pytest.mark.parametrize("dataset", ["quickstart", "deposition", "string_sweep", "partial"])
+@pytest.mark.parametrize("dataset", ["quickstart", "deposition", "string_sweep", "colliding_paths", "partial"])
 def test_the_checker_reports_no_error(dataset, request):
     failures = cf_failures(request.getfixturevalue(dataset))
     assert not failures, f"{CF} reports for the {dataset} dataset:\n" + "\n".join(failures)

@@ -157,6 +157,31 @@ def test_a_negative_time_limit_is_one_line(job, capsys):
     assert line.startswith("parsim: error: argument --time-limit: '-00:00:05': allowed: HH:MM:SS")
 
 
+USAGE_ERRORS = [(["--ranks-per-task", "two"], "argument --ranks-per-task: invalid int value: 'two'"),
+                (["--time-limit", "5 minutes"], "argument --time-limit: '5 minutes': allowed: HH:MM:SS")]
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("option, line", USAGE_ERRORS)
+def test_a_usage_error_under_mpi_is_one_line(job, tmp_path, option, line):
+    result = run_mpi(["-m", "parsim", "run", str(job), "--output", str(tmp_path / "out"), *option], timeout=120)
+    assert result.returncode == 2, result.stderr
+    (reported,) = error_lines(result.stderr)
+    assert reported.startswith(f"parsim: error: {line}"), result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("option, line", USAGE_ERRORS)
+def test_a_usage_error_is_said_by_the_launchers_rank_0_alone(job, tmp_path, option, line):
+    """Each rank of a launch exits with status 2; the others say nothing, whichever launcher started them."""
+    for rank, said in (("0", [line]), ("1", [])):
+        environment = {**os.environ, "PMI_RANK": rank}
+        result = subprocess.run([sys.executable, "-m", "parsim", "run", str(job), *option], capture_output=True,
+                                text=True, timeout=120, env=environment)
+        assert result.returncode == 2, result.stderr
+        assert [text.split("parsim: error: ")[1][:len(line)] for text in lines(result.stderr)] == said, rank
+
+
 def test_nothing_runs_on_after_an_abort_that_returns(tmp_path):
     # MPICH's MPI_Abort may return when the launcher is ending the job already; the rank must end anyway,
     # or the command would go on with a result it does not have

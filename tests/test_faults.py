@@ -39,6 +39,16 @@ packing_samples = 1000
 """
 
 AGGLOMERATE = DEPOSITION + 'shape = "agglomerate"\nagglomerate_file = "{folder}/flake{suffix}"\n'
+MESH = DEPOSITION + 'shape = "mesh"\nmesh_file = "{folder}/flake{suffix}"\nmesh_spheres = 20\n'
+
+
+def cube_obj(half: float) -> bytes:
+    """An OBJ file of the closed cube [-half, half]^3, its faces wound outwards (corner 4x + 2y + z)."""
+    corners = [(x, y, z) for x in (-half, half) for y in (-half, half) for z in (-half, half)]
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in corners]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for q in quads for a, b, c in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))]
+    return ("\n".join(lines) + "\n").encode()
 
 
 @dataclass
@@ -51,7 +61,7 @@ class Fault:
 
     job: str
     names: str
-    flake: bytes | None = None  #: content of the agglomerate file ``{folder}/flake{suffix}``
+    flake: bytes | None = None  #: content of the input file ``{folder}/flake{suffix}`` (agglomerate or mesh)
     suffix: str = ".csv"
     encoding: str = "utf-8"  #: of the job file
 
@@ -101,6 +111,7 @@ FAULTS = {
     "agglomerate CSV that is empty": Fault(AGGLOMERATE, "agglomerate_file", b""),
     "agglomerate CSV with ragged rows": Fault(AGGLOMERATE, "agglomerate_file", b"x,y,z,r\n0,0,0,1\n0,0,1\n"),
     "agglomerate CSV that is binary": Fault(AGGLOMERATE, "agglomerate_file", b"\x89PNG\r\n\x1a\n\x00"),
+    "mesh of coordinates near 1e200": Fault(MESH, "mesh_file", cube_obj(1e200), ".obj"),
     "aggregation beyond memory": Fault(changed(AGGREGATION, "n_spheres = 16", "n_spheres = 1000000000000"),
                                        "n_spheres=1000000000000"),
     "deposition beyond memory": Fault(changed(DEPOSITION, "n_particles = 10", "n_particles = 1000000000000"),
@@ -143,3 +154,19 @@ def test_a_bad_input_gets_one_line_and_creates_nothing(fault, command, tmp_path)
     assert lines[0].startswith("parsim: error: ") and fault.names in lines[0], lines[0]
     assert "Traceback" not in result.stderr and "Warning" not in result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_a_mesh_trimesh_cannot_compute_with_says_why_in_its_line(tmp_path):
+    """The cube that is refused at 1e200 is a valid mesh at 1: the line names the arithmetic, not the shape."""
+    for half, status in ((1.0, 0), (1e200, 2)):
+        job = written(Fault(MESH, "mesh_file", cube_obj(half), ".obj"), tmp_path)
+        result = subprocess.run([sys.executable, "-m", "parsim.cli", "validate", str(job)], capture_output=True,
+                                text=True, cwd=REPOSITORY, timeout=300)
+        assert result.returncode == status, result.stderr
+        if status:
+            (line,) = result.stderr.splitlines()
+            assert "trimesh could not compute with its coordinates (invalid value encountered in cast)" in line
+            assert line.endswith("give finite coordinates below 1e10 in size (the particle is scaled to sphere_radius "
+                                 "whatever the mesh's size)")
+        else:
+            assert result.stderr == "", result.stderr

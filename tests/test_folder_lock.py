@@ -44,8 +44,9 @@ def dead_pid():
 
 def test_a_live_holder_is_named_and_its_lock_kept(tmp_path):
     path = write_lock(tmp_path, socket.gethostname(), os.getpid())
-    with pytest.raises(JobError, match=f"in use by another parsim run \\(process {os.getpid()} on host "):
+    with pytest.raises(JobError, match=f"in use by another parsim run \\(process {os.getpid()} on host ") as error:
         FolderLock(tmp_path).acquire()
+    assert str(error.value).endswith("; wait for it to finish or give another output folder")  # it is alive
     assert path.exists()
 
 
@@ -60,8 +61,10 @@ def test_a_dead_holder_on_this_host_is_taken_over(tmp_path):
 
 def test_a_holder_on_another_host_counts_as_alive_while_it_beats(tmp_path):
     write_lock(tmp_path, "another-node", 1, age=STALE_SECONDS / 2)
-    with pytest.raises(JobError, match="on host another-node"):
+    with pytest.raises(JobError, match="on host another-node") as error:
         FolderLock(tmp_path).acquire()
+    assert str(error.value).endswith(f"; wait for it to finish or give another output folder (if that run is dead, "
+                                     f"the next run takes its lock over {STALE_SECONDS:.0f} s after its last refresh)")
     write_lock(tmp_path, "another-node", 1, age=2 * STALE_SECONDS)  # no heartbeat: that run is gone
     lock = FolderLock(tmp_path)
     lock.acquire()

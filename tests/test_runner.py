@@ -1,5 +1,6 @@
 """Jobs end to end: the same dataset on 1 and 2 ranks, after a kill and resume, and the file layouts."""
 
+import os
 import shutil
 import signal
 import subprocess
@@ -14,6 +15,7 @@ import xarray as xr
 
 import parsim
 from parsim.job import load_job
+from parsim.output.lock import LOCK_NAME, read_holder
 from parsim.output.snapshot import OUTPUT_SCHEMA
 from parsim.solvers import SOLVERS
 from tests.datasets import reproducible_part, run_serial
@@ -167,15 +169,56 @@ def test_ctrl_c_ends_every_rank_with_one_line_and_resumes(quickstart_two_ranks, 
                                 reproducible_part(quickstart_two_ranks / "quickstart.nc"))
 
 
-def test_sigterm_of_a_batch_system_keeps_the_finished_tasks(tmp_path):
+@pytest.mark.parametrize("number", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_or_sighup_of_the_process_group_keeps_the_finished_tasks(tmp_path, number):
+    """A batch system's SIGTERM, a closed terminal's SIGHUP: the line, the shell's status, the lock gone; the
+    same command then computes the other tasks alone."""
     command = [sys.executable, *parsim_command("run", QUICKSTART, "--output", str(tmp_path), "--quiet")]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
     wait_for_task_files(tmp_path / "tasks", 2, process)
-    process.send_signal(signal.SIGTERM)
+    os.killpg(process.pid, number)
     _, stderr = process.communicate(timeout=30)
-    kept = len(list((tmp_path / "tasks").glob("*.h5")))
-    assert process.returncode == 128 + signal.SIGTERM
-    assert error_lines(stderr) == [f"parsim: stopped by SIGTERM; {kept} of 36 tasks kept, run the same command to finish"]
+    kept = {path: path.read_bytes() for path in (tmp_path / "tasks").glob("*.h5")}
+    assert process.returncode == 128 + number
+    assert error_lines(stderr) == [f"parsim: stopped by {number.name}; {len(kept)} of 36 tasks kept, run the same "
+                                   "command to finish"]
+    assert not (tmp_path / "parsim.lock").exists()
+
+    result = run_serial("run", QUICKSTART, "--output", str(tmp_path), "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert all(path.read_bytes() == content for path, content in kept.items())  # kept, not computed again
+    with xr.open_dataset(tmp_path / "quickstart.nc") as dataset:
+        assert dataset.fractal_dimension.size == 36 and bool(dataset.fractal_dimension.notnull().all())
+
+
+@pytest.mark.mpi
+def test_sighup_of_mpiexec_leaves_no_lock_to_remove_and_loses_nothing(quickstart_two_ranks, tmp_path):
+    """MPICH's mpiexec does not forward SIGHUP, as it does SIGINT and SIGTERM: it ends at once, and its proxies
+    kill the ranks, which get no signal (each runs in a session of its own), so no rank can say a line or remove
+    the lock. The next run takes the lock over by itself (its holder, rank 0, is gone) and finishes the job."""
+    command = [mpiexec(), "-n", "2", sys.executable, *parsim_command("run", QUICKSTART, "--output", str(tmp_path),
+                                                                       "--quiet")]
+    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    wait_for_task_files(tmp_path / "tasks", 3, process)
+    holder = read_holder(tmp_path / LOCK_NAME)
+    os.killpg(process.pid, signal.SIGHUP)
+    try:
+        process.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        kill_session(process)
+        raise AssertionError("mpiexec did not end within 30 s of SIGHUP") from None
+    deadline = time.monotonic() + 30
+    while Path(f"/proc/{holder.pid}").exists() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert 3 <= len(list((tmp_path / "tasks").glob("*.h5"))) < 36, "the signal should land in the middle of the job"
+
+    result = run_mpi(parsim_command("run", QUICKSTART, "--output", str(tmp_path), "--quiet"))
+    assert result.returncode == 0, result.stderr
+    assert not (tmp_path / LOCK_NAME).exists()
+    xr.testing.assert_identical(reproducible_part(tmp_path / "quickstart.nc"),
+                                reproducible_part(quickstart_two_ranks / "quickstart.nc"))
 
 
 @pytest.mark.mpi

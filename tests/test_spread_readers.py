@@ -10,6 +10,7 @@ same sediment picture, and the reader of ``substrate`` and ``agglomerate_file`` 
 a job's input) the same spheres, or an error where a part is missing, never the zeros HDF5 reads.
 """
 
+import os
 import re
 import shutil
 
@@ -139,3 +140,27 @@ def test_a_spread_task_file_as_a_jobs_input_without_its_part_is_refused(outputs,
     (parts_folder(copy) / "rank0001.h5").unlink()  # HDF5 alone would read its rows as zeros
     with pytest.raises(JobError, match=f"substrate = {re.escape(repr(str(copy)))}: .*rank0001.h5 is missing"):
         read_agglomerate(copy, key="substrate", with_substrate=True)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "garbage"])
+@pytest.mark.parametrize("command", ["export", "plot"])
+def test_a_damaged_part_file_is_named_with_what_to_do(outputs, tmp_path, damage, command):
+    two, _, labels = outputs
+    out = tmp_path / "two"
+    shutil.copytree(two, out)
+    task = task_file(out, labels[0])
+    part = parts_folder(task) / "rank0001.h5"
+    if damage == "truncated":
+        os.truncate(part, part.stat().st_size // 2)
+    else:
+        part.write_bytes(b"not HDF5 " * 100)
+    written = tmp_path / f"{labels[0]}.csv" if command == "export" else tmp_path / f"{labels[0]}.png"
+    options = ["--format", "csv"] if command == "export" else ["--figure", "sediment"]
+    result = run_serial(command, str(out), "--task", labels[0], *options, "--out", str(written))
+    assert result.returncode == 2, result.stderr
+    (line,) = result.stderr.splitlines()
+    assert line.startswith(f"parsim: error: cannot read {part}, a part of task file {task} ("), line
+    assert line.endswith(f"): compute the job again into another output folder (key 'output' or option --output) "
+                         f"for this task's configuration, or remove {task} and {parts_folder(task)}: its task stays "
+                         f"finished (its statistics are in {out / 'rows'}), without its configuration"), line
+    assert not list(tmp_path.glob(f"{labels[0]}.*"))

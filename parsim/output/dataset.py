@@ -25,14 +25,15 @@ from parsim.job import Job
 from parsim.output.atomic import write_bytes_atomically
 from parsim.output.rows import RowLayout
 from parsim.output.snapshot import check_schema, provenance_attributes
-from parsim.solver import Solver, Statistic, coded_coordinate, flag_word, named_values, resolve_units
+from parsim.solver import Solver, Statistic, coded_coordinate, flag_words, named_values, resolve_units
 
 WALL_TIME = Statistic("wall_time", "s", "wall-clock time of the task on its rank", measured=True)
 """Measured by the runner for every task, whatever the solver."""
 
 VALUES_ATTRIBUTE = "parsim_values"
 """The values of a swept string parameter as the job wrote them (a JSON list, in code order): its
-``flag_meanings`` are CF words (a file's path, say, with ``_`` for ``/``)."""
+``flag_meanings`` are CF words (a file's path, say, with ``_`` for ``/``, and ``@2`` added to
+tell it from another value that has the same word)."""
 
 MISSING_INTEGER = -1
 """An integer statistic's value for a task that has not finished, in a partial dataset (its _FillValue)."""
@@ -147,7 +148,7 @@ def _sweep_coordinates(job: Job, solver: Solver) -> dict[str, xr.Variable]:
     for name, values in job.sweep.items():
         values, attrs = np.asarray(values), _parameter_attributes(job, solver, name)
         if values.dtype.kind in "USO":
-            coded = coded_coordinate(attrs["long_name"], tuple(flag_word(value) for value in values))
+            coded = coded_coordinate(attrs["long_name"], flag_words(values.tolist()))
             attrs = {"units": coded.units, "long_name": coded.long_name, **coded.attrs,
                      VALUES_ATTRIBUTE: json.dumps([str(value) for value in values])}
             values = coded.values

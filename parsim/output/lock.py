@@ -99,9 +99,16 @@ class FolderLock:
             return  # released between our attempt and this look: try again
         if holder is not None and not self._is_gone(holder, age):
             raise JobError(f"output folder {self.root} is in use by another parsim run ({holder.describe()}); "
-                           f"wait for it to finish or give another output folder; if that run is dead, "
-                           f"remove {self.path}")
+                           f"wait for it to finish or give another output folder{self._when_taken_over(holder)}")
         _remove_if_same(self.path, identity)
+
+    def _when_taken_over(self, holder: Holder) -> str:
+        """How a dead holder's lock goes, for the refusal: on this host the holder is known to live; on
+        another, only its heartbeat tells, so a run that died there still holds the lock for a while."""
+        if holder.host == self._me.host:
+            return ""
+        return (f" (if that run is dead, the next run takes its lock over {STALE_SECONDS:.0f} s after its last "
+                "refresh)")
 
     def _is_gone(self, holder: Holder, age: float) -> bool:
         if holder.host != self._me.host:

@@ -171,11 +171,17 @@ def read_schema_attributes(path: Path) -> dict:
     try:
         with h5py.File(path, "r") as file:
             return {name: file.attrs[name] for name in (SCHEMA_ATTRIBUTE, VERSION_ATTRIBUTE) if name in file.attrs}
-    except OSError as error:  # the task's row stays: removing the file loses the configuration alone
-        raise OutputError(f"cannot read task file {path}: {error}; remove it to use the folder again: its task "
-                          f"stays finished (its statistics are in {Path(path).parent.parent / 'rows'}), without "
-                          "its configuration, which only the job computed into another output folder gives "
-                          "again") from None
+    except OSError as error:
+        raise OutputError(f"cannot read task file {path}: {error}; remove it to use the folder again: "
+                          f"{_kept_without_configuration(path)}, which only the job computed into another output "
+                          "folder gives again") from None
+
+
+def _kept_without_configuration(path: Path) -> str:
+    """What removing the unreadable task file ``path`` leaves: its task's row stays, so the task stays
+    finished and a run into the folder does not compute it again."""
+    return (f"its task stays finished (its statistics are in {Path(path).parent.parent / 'rows'}), without its "
+            "configuration")
 
 
 def read_configuration(path: Path) -> Configuration:
@@ -215,11 +221,31 @@ def read_arrays(file: h5py.File, names=None) -> dict:
 
 
 def _read_array(file: h5py.File, name: str) -> np.ndarray:
-    """The values of dataset ``name``; a virtual one's part files must exist (HDF5 would read zeros instead)."""
+    """The values of dataset ``name``; a virtual one's part files must exist (HDF5 would read zeros instead),
+    and one that HDF5 cannot read is named (HDF5's error names the task file, which is intact)."""
     dataset, path = file[name], Path(file.filename)
-    if dataset.is_virtual:
-        for source in dataset.virtual_sources():
-            if not (path.parent / source.file_name).is_file():
-                raise OutputError(f"task file {path} joins the ranks' files in {parts_folder(path)}, and "
-                                  f"{source.file_name} is missing: copy or move the task file with that folder")
-    return dataset[()]
+    if not dataset.is_virtual:
+        return dataset[()]
+    parts = [path.parent / source.file_name for source in dataset.virtual_sources()]
+    for part in parts:
+        if not part.is_file():
+            raise OutputError(f"task file {path} joins the ranks' files in {parts_folder(path)}, and "
+                              f"{part.name} is missing: copy or move the task file with that folder")
+    try:
+        return dataset[()]
+    except OSError:
+        for part in parts:
+            _check_part(part, name, path)
+        raise
+
+
+def _check_part(part: Path, name: str, path: Path) -> None:
+    """Refuse the part file ``part`` of task file ``path`` if its array ``name`` cannot be read (truncated,
+    overwritten): a one-line OutputError naming it, and what to do."""
+    try:
+        with h5py.File(part, "r") as file:
+            file[name][()]
+    except (OSError, KeyError) as error:
+        raise OutputError(f"cannot read {part}, a part of task file {path} ({error}): compute the job again into "
+                          f"another output folder (key 'output' or option --output) for this task's configuration, "
+                          f"or remove {path} and {parts_folder(path)}: {_kept_without_configuration(path)}") from None

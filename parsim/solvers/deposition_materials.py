@@ -22,6 +22,7 @@ import functools
 import math
 import os
 import re
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -285,10 +286,32 @@ def mesh_volume(params: dict) -> float:
 
 @functools.lru_cache(maxsize=8)
 def _mesh_spheres(path: str, n_spheres: int):
-    try:
-        return mesh_particle(path, n_spheres=n_spheres)
-    except ValueError as error:
-        raise JobError(f"mesh_file = {path!r}: {error}") from None
+    """:func:`mesh_particle` of ``path``; a mesh it refuses is a one-line JobError.
+
+    The RuntimeWarnings of trimesh and numpy computing with the file's coordinates are held back (they
+    print two lines each, before parsim's): where the mesh is then refused, the first of them says why
+    in its line (trimesh merges vertices by rounding coordinates times 1e8 to 64-bit integers, which
+    overflows beyond about 1e11 and makes the mesh look open); a mesh built despite them passed every
+    check of its own.  Other warnings are shown as usual."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        try:
+            return mesh_particle(path, n_spheres=n_spheres)
+        except ValueError as error:
+            raise JobError(f"mesh_file = {path!r}: {error}{_arithmetic_cause(caught)}") from None
+        finally:
+            for warning in caught:
+                if not issubclass(warning.category, RuntimeWarning):
+                    warnings.showwarning(warning.message, warning.category, warning.filename, warning.lineno)
+
+
+def _arithmetic_cause(caught: list) -> str:
+    """What the first RuntimeWarning of ``caught`` tells of a refused mesh, as the end of its line."""
+    first = next((warning for warning in caught if issubclass(warning.category, RuntimeWarning)), None)
+    if first is None:
+        return ""
+    return (f"; trimesh could not compute with its coordinates ({first.message}): give finite coordinates "
+            "below 1e10 in size (the particle is scaled to sphere_radius whatever the mesh's size)")
 
 
 @functools.lru_cache(maxsize=16)
