@@ -87,6 +87,9 @@ def _parser() -> argparse.ArgumentParser:
                      help="run each task on a group of K ranks (a divisor of the number of ranks; default 1): "
                           "time-stepping aggregation and deposition tasks are decomposed over the group, "
                           "event-driven aggregation tasks run on the group's first rank while the others wait")
+    run.add_argument("--phase-times", type=Path, metavar="FILE",
+                     help="write, as JSON, each rank's seconds by phase of the run (reading the job, warm-up, each "
+                          "task's initial condition, steps, statistics, task file and row, the dataset)")
     run.add_argument("--time-limit", type=_duration, metavar="[D-]HH:MM:SS",
                      help="stop handing out tasks in time for the tasks under way to end and the (partial) dataset "
                           "to be written before this much time has passed, e.g. a batch job's limit minus a margin; "
@@ -214,12 +217,17 @@ def _run_job(args, comm) -> tuple[Path | None, bool]:
     """Read the job on rank 0 and run it on every rank of ``comm`` (:func:`parsim.runner.run_job`)."""
     from parsim.job import load_job
     from parsim.parallel.collective import on_root
+    from parsim.phases import phase, write_phase_times
     from parsim.runner import run_job
     from parsim.solvers import SOLVERS
 
-    job = on_root(comm, lambda: load_job(args.job, SOLVERS, output=args.output))
-    return run_job(job, comm, progress=not args.quiet, ranks_per_task=args.ranks_per_task,
-                   time_limit=args.time_limit)
+    with phase("read_job"):
+        job = on_root(comm, lambda: load_job(args.job, SOLVERS, output=args.output))
+    outcome = run_job(job, comm, progress=not args.quiet, ranks_per_task=args.ranks_per_task,
+                      time_limit=args.time_limit)
+    if args.phase_times is not None:
+        write_phase_times(args.phase_times, comm)
+    return outcome
 
 
 def _interrupted_before_tasks() -> int:

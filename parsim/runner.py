@@ -42,6 +42,7 @@ from parsim.output.rows import RowWriter
 from parsim.output.snapshot import provenance_attributes, write_task_file
 from parsim.parallel.collective import on_root, wait_for
 from parsim.parallel.scheduler import TimeLimit, require_thread_multiple, run_group_tasks
+from parsim.phases import phase
 from parsim.progress import (TaskProgress, announcing_compilation, announcing_preparation, reporting_settled,
                              settled_lines)
 from parsim.solver import TaskResult
@@ -76,7 +77,8 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
 
     try:
         with ending_on_signals(lambda number: _end_on_signal(number, job, folder, lock, writing, comm)):
-            pending = on_root(comm, lambda: _claim(job, folder, lock))
+            with phase("claim_folder"):
+                pending = on_root(comm, lambda: _claim(job, folder, lock))
             if not pending and on_root(comm, lambda: _dataset_is_current(job, folder)):
                 if rank == 0:
                     print(f"parsim: nothing to compute: the {len(job.tasks())} tasks of {job.name} have finished "
@@ -86,7 +88,8 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
                                            ranks_per_task, limit, settling=progress)
             wait_for(comm.Ibarrier())  # every rank has closed its row file before rank 0 reads them
             start = time.perf_counter()
-            outputs = on_root(comm, lambda: _write_outputs(job, folder, comm.Get_size(), ranks_per_task))
+            with phase("dataset"):
+                outputs = on_root(comm, lambda: _write_outputs(job, folder, comm.Get_size(), ranks_per_task))
             if progress and rank == 0 and done:
                 print(f"parsim: {done} tasks in {computing:.1f} s ({done / computing:.0f} tasks/s on "
                       f"{comm.Get_size()} ranks), dataset written in {time.perf_counter() - start:.1f} s",
@@ -122,7 +125,8 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
     """Run the ``pending`` tasks; on rank 0, how many finished and in how many seconds (after the warm-up).
     ``progress``: this rank draws the job's bar; ``settling``: this rank's long tasks say how far they got."""
     solver = job.solver
-    warm_up(job, pending, progress, comm)
+    with phase("warm_up", whole=True):
+        warm_up(job, pending, progress, comm)
     point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
     # Costliest first, so that the last tasks to start are short and no rank idles at the end; every
     # rank sorts alike (a stable sort of the same list), so a task index means the same task everywhere.
@@ -146,9 +150,11 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
             return  # the task's result is on the group's rank 0
         with writing:
             if job.keeps_configuration(task):  # every rank of a group whose ranks hold shares of the configuration
-                write_task_file(folder.task_path(task), result, task_attributes(job, task), group)
+                with phase("task_file"):
+                    write_task_file(folder.task_path(task), result, task_attributes(job, task), group)
             if group.Get_rank() == 0:
-                rows.append(task.key, task.realization, result.statistics)
+                with phase("row"):
+                    rows.append(task.key, task.realization, result.statistics)
 
     def describe_failure(k: int, error: Exception) -> str:
         task = pending[k]
@@ -178,7 +184,8 @@ def solve_task(job: Job, task: Task, comm: MPI.Comm) -> TaskResult | None:
     """
     solver = job.solver
     start = time.perf_counter()
-    result = solver.solve(job.point_parameters(task.point), np.random.default_rng(job.seed_sequence(task)), comm)
+    with phase("solve_rest"):  # what the solver's own phases (initial condition, steps, statistics) leave
+        result = solver.solve(job.point_parameters(task.point), np.random.default_rng(job.seed_sequence(task)), comm)
     if result is not None:
         result.statistics["wall_time"] = time.perf_counter() - start
     return result

@@ -77,6 +77,7 @@ from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, N_EVENT_K
 from parsim.errors import JobError
 from parsim.parallel.collective import abort_if_alone
 from parsim.parallel.halo import kernel_link
+from parsim.phases import phase
 
 __all__ = ["BlockLayout", "CellGrowth", "deposit_decomposed", "deposit_streamed", "DecomposedDeposition",
            "DecompositionError", "InvalidDeposition", "default_halo", "drop_order", "spans"]
@@ -287,8 +288,9 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
     started = time.perf_counter()
     try:
         try:
-            survey = _Survey(shape_offsets, shape_radii, shape_start, particle_chunks, box_lower_xy, box_upper_xy,
-                             lateral, floor, settings, comm.Get_size(), comm.Get_rank())
+            with phase("survey"):
+                survey = _Survey(shape_offsets, shape_radii, shape_start, particle_chunks, box_lower_xy,
+                                 box_upper_xy, lateral, floor, settings, comm.Get_size(), comm.Get_rank())
             halo = default_halo(survey.prep, survey.largest_scale, survey.cells.cell[-1]) if halo is None \
                 else float(halo)
             if not (np.isfinite(halo) and halo > 0):

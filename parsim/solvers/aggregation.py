@@ -27,6 +27,7 @@ from parsim.core.statistics import MIN_FIT_BOX_SIZES, cluster_statistics, fit_bo
 from parsim.core.ts import FORMULATIONS, DahaParameters, MinimiserFailure, simulate_ts
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import LARGEST_QUANTITY, REQUIRED, Parameter
+from parsim.phases import phase
 from parsim.solver import (LENGTH_UNITS, MASS_UNITS, SPEED_UNITS, TIME_UNITS, Configuration, Coordinate, Solver,
                            Statistic, TaskResult, coded_coordinate, flag_attributes)
 
@@ -322,28 +323,31 @@ def solve(params: dict, rng: np.random.Generator, comm: "MPI.Comm") -> TaskResul
         return None  # ED is serial: the group's rank 0 computes it
     n, d, radius = params["n_spheres"], params["dimension"], params["radius"]
     length = box_length(params)
-    positions = lattice_positions(n, d, length, rng)
-    if params["initial_condition"] == PAPER_INITIAL_CONDITION:
-        velocities = isotropic_velocities(n, d, params["speed"], rng)
-    else:
-        velocities = uniform_cube_velocities(n, d, rng)
-    radii = np.full(n, radius)
-    masses = np.full(n, params["mass"])
+    with phase("initial_condition"):
+        positions = lattice_positions(n, d, length, rng)
+        if params["initial_condition"] == PAPER_INITIAL_CONDITION:
+            velocities = isotropic_velocities(n, d, params["speed"], rng)
+        else:
+            velocities = uniform_cube_velocities(n, d, rng)
+        radii = np.full(n, radius)
+        masses = np.full(n, params["mass"])
 
-    if params["method"] == "ts":
-        run = _run_ts(params, positions, velocities, radii, masses, length, comm)
-    else:
-        run = _run_ed(params, positions, velocities, radii, masses, length)
+    with phase("steps"):
+        if params["method"] == "ts":
+            run = _run_ts(params, positions, velocities, radii, masses, length, comm)
+        else:
+            run = _run_ed(params, positions, velocities, radii, masses, length)
     if not leader:
         return None
     if not (np.all(np.isfinite(run.positions)) and np.all(np.isfinite(run.velocities))):
         raise NumericalError(f"non-finite positions or velocities after {run.n_events} events")
 
     lower, upper = np.zeros(d), np.full(d, length)
-    shape = cluster_statistics(run.positions, radii, lower, upper,
-                               contact_factor=params["contact_factor"],
-                               r_values=pair_distribution_grid(radius, params["pair_distribution_points"]),
-                               box_levels=params["box_levels"])
+    with phase("statistics"):
+        shape = cluster_statistics(run.positions, radii, lower, upper,
+                                   contact_factor=params["contact_factor"],
+                                   r_values=pair_distribution_grid(radius, params["pair_distribution_points"]),
+                                   box_levels=params["box_levels"])
     statistics = {
         "box_length": length,
         **{name: shape[name] for name in ("aspect_ratio", "orientation", "contact_number", "pair_distribution",

@@ -29,6 +29,7 @@ from parsim.core.sediment import MAX_POINTS_PER_CAP
 from parsim.errors import JobError, NumericalError
 from parsim.machine import check_memory
 from parsim.parameters import LARGEST_QUANTITY, REQUIRED, Parameter
+from parsim.phases import phase
 from parsim.progress import settled_reporter
 from parsim.solver import LENGTH_UNITS, Configuration, Solver, TableArray, TaskResult
 from parsim.solvers import deposition_statistics as statistics
@@ -474,17 +475,22 @@ def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
     """One task on the ranks of ``comm`` (:func:`parsim.parallel.deposition.deposit_streamed` on
     several); every rank returns the statistics and its share of the configuration."""
     spread = comm is not None and comm.Get_size() > 1
-    inputs = deposition_inputs(params, rng, spread)
+    with phase("initial_condition"):
+        inputs = deposition_inputs(params, rng, spread)
     if spread:
         return _solve_spread(comm, params, inputs)
     n = params["n_particles"]
-    drops, rotation, drop_xy = next(inputs.particles())
-    result = sdbd.deposit(*inputs.shapes, drops.species, drops.scale, rotation, drop_xy, *inputs.container,
-                          **inputs.options, progress=settled_reporter(n))
+    with phase("initial_condition"):
+        drops, rotation, drop_xy = next(inputs.particles())
+    with phase("steps"):
+        result = sdbd.deposit(*inputs.shapes, drops.species, drops.scale, rotation, drop_xy, *inputs.container,
+                              **inputs.options, progress=settled_reporter(n))
     _check_sediment(params, result.stopped_at, np.all(np.isfinite(result.positions)))
-    return TaskResult(statistics.measure(params, result, inputs.species, drops, inputs.geometry, inputs.skip,
-                                         inputs.substrate),
-                      _configuration(params, inputs.geometry, result, inputs.species, drops, inputs.substrate))
+    with phase("statistics"):
+        measured = statistics.measure(params, result, inputs.species, drops, inputs.geometry, inputs.skip,
+                                      inputs.substrate)
+    return TaskResult(measured, _configuration(params, inputs.geometry, result, inputs.species, drops,
+                                               inputs.substrate))
 
 
 @dataclass(frozen=True)
@@ -561,13 +567,16 @@ def _solve_spread(comm, params, inputs: DepositionInputs) -> TaskResult:
     from parsim.parallel.deposition import deposit_streamed
     from parsim.parallel.deposition_statistics import measure_decomposed
 
-    share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options)
+    with phase("steps"):  # the survey of the particles' inputs is a phase of its own
+        share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options)
     _check_sediment(params, share.stopped_at,
                     comm.allreduce(bool(np.all(np.isfinite(share.positions))), op=MPI.LAND))
     own = Drops(share.particle_shape, share.particle_scale)
-    return TaskResult(measure_decomposed(comm, params, share, inputs.species, own, inputs.geometry, inputs.skip,
-                                         inputs.substrate),
-                      _configuration(params, inputs.geometry, share, inputs.species, own, inputs.substrate, comm))
+    with phase("statistics"):
+        measured = measure_decomposed(comm, params, share, inputs.species, own, inputs.geometry, inputs.skip,
+                                      inputs.substrate)
+    return TaskResult(measured, _configuration(params, inputs.geometry, share, inputs.species, own,
+                                               inputs.substrate, comm))
 
 
 def _check_sediment(params, stopped_at, finite) -> None:

@@ -1,0 +1,78 @@
+"""Seconds by phase: a phase inside another counts once, and ``parsim run --phase-times`` accounts for
+every rank's run with the phases a task goes through."""
+
+import json
+import time
+
+import pytest
+
+from parsim import phases
+from parsim.phases import phase, phase_times
+from tests.mpi import parsim_command, run_mpi_bounded
+
+#: a small spread deposition: every phase of a task, the survey included, on 2 ranks
+DEPOSITION = """
+name = "phased"
+kind = "deposition"
+seed = 3
+realizations = 2
+[parameters]
+n_particles = 300
+box_length = 14.0
+"""
+
+
+@pytest.fixture
+def fresh_totals(monkeypatch):
+    monkeypatch.setattr(phases, "_totals", {})
+    monkeypatch.setattr(phases, "_counts", {})
+
+
+def test_an_inner_phase_is_taken_out_of_the_outer_one(fresh_totals):
+    with phase("outer"):
+        time.sleep(0.05)
+        with phase("inner"):
+            time.sleep(0.1)
+    seconds = phase_times()["seconds"]
+    assert seconds["inner"] >= 0.1
+    assert 0.05 <= seconds["outer"] < 0.1  # its own 0.05 s, not the inner 0.1 s too
+
+
+def test_a_whole_phase_keeps_what_is_timed_inside_it(fresh_totals):
+    with phase("warm_up", whole=True):
+        with phase("steps"):
+            time.sleep(0.05)
+    with phase("steps"):
+        pass
+    times = phase_times()
+    assert times["seconds"]["warm_up"] >= 0.05
+    assert times["count"] == {"warm_up": 1, "steps": 1}  # the rehearsal's steps are warm-up
+
+
+def test_a_failing_phase_is_timed_and_ends(fresh_totals):
+    with pytest.raises(ValueError):
+        with phase("statistics"):
+            raise ValueError("numerical trouble")
+    with phase("row"):
+        pass
+    assert phase_times()["count"] == {"statistics": 1, "row": 1}
+
+
+@pytest.mark.mpi
+def test_a_spread_task_run_reports_every_rank_by_phase(tmp_path):
+    job = tmp_path / "phased.toml"
+    job.write_text(DEPOSITION)
+    report = tmp_path / "phases.json"
+    process, seconds = run_mpi_bounded(parsim_command("run", str(job), "--output", str(tmp_path / "out"), "--quiet",
+                                                      "--ranks-per-task", "2", "--phase-times", str(report)), 900)
+    assert process.returncode == 0, process.stderr
+    ranks = json.loads(report.read_text())["ranks"]
+    assert len(ranks) == 2
+    for rank, times in enumerate(ranks):
+        # both ranks deposit, survey and measure both tasks together; rank 0 alone writes rows and the dataset
+        for name in ("warm_up", "initial_condition", "survey", "steps", "statistics", "task_file"):
+            assert times["count"][name] == (1 if name == "warm_up" else 2), (rank, name)
+        assert ("row" in times["count"]) == (rank == 0)
+        assert sum(times["seconds"].values()) <= times["wall"] <= seconds
+        assert all(value >= 0.0 for value in times["seconds"].values())
+
