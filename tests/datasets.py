@@ -52,6 +52,16 @@ def run_serial(*arguments, cwd=None):
                           timeout=900, cwd=cwd)
 
 
+def run_jobs(root: Path, jobs: dict[str, str]) -> dict[str, Path]:
+    """Each job text of ``jobs`` (by name) written to ``root`` and run serially into ``root/NAME``;
+    the output folders by name."""
+    for name, text in jobs.items():
+        (root / f"{name}.toml").write_text(text)
+        result = run_serial("run", str(root / f"{name}.toml"), "--output", str(root / name), "--quiet")
+        assert result.returncode == 0, result.stderr
+    return {name: root / name for name in jobs}
+
+
 def small_aggregation_job(name: str, seed: int) -> str:
     """A job of twelve small 2D aggregation tasks (4 points x 3 realisations), a second or two in all."""
     return f"""

@@ -35,7 +35,7 @@ from parsim.core.sdbd.rotation import quat_to_matrix  # noqa: E402
 from parsim.output.export import FORMATS, add_export_command, export_output, run_export  # noqa: E402
 from parsim.solvers.deposition import PARAMETERS as DEPOSITION_PARAMETERS  # noqa: E402
 from parsim.solvers.deposition_materials import particle_shape  # noqa: E402
-from tests.datasets import run_serial  # noqa: E402
+from tests.datasets import run_jobs  # noqa: E402
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 
@@ -121,12 +121,7 @@ FLOAT32 = 1e-7
 
 @pytest.fixture(scope="module")
 def outputs(tmp_path_factory):
-    root = tmp_path_factory.mktemp("jobs")
-    for kind, text in JOBS.items():
-        (root / f"{kind}.toml").write_text(text)
-        result = run_serial("run", str(root / f"{kind}.toml"), "--output", str(root / kind), "--quiet")
-        assert result.returncode == 0, result.stderr
-    return {kind: root / kind for kind in JOBS}
+    return run_jobs(tmp_path_factory.mktemp("jobs"), JOBS)
 
 
 @pytest.fixture(params=list(JOBS))

@@ -22,7 +22,7 @@ from parsim.cli import main
 from parsim.errors import JobError
 from parsim.output.export import TaskSpheres, read_task
 from parsim.output.voxels import COLUMN_TEMPORARY_BYTES, image_grid, voxelize, write_voxels
-from tests.datasets import run_serial
+from tests.datasets import run_jobs
 
 MEMORY = 8 << 20
 """The machine's physical memory in these tests: 8 MiB."""
@@ -37,12 +37,7 @@ JOBS = {
 
 @pytest.fixture(scope="module")
 def outputs(tmp_path_factory):
-    root = tmp_path_factory.mktemp("jobs")
-    for kind, text in JOBS.items():
-        (root / f"{kind}.toml").write_text(text)
-        result = run_serial("run", str(root / f"{kind}.toml"), "--output", str(root / kind), "--quiet")
-        assert result.returncode == 0, result.stderr
-    return {kind: root / kind for kind in JOBS}
+    return run_jobs(tmp_path_factory.mktemp("jobs"), JOBS)
 
 
 @pytest.fixture(autouse=True)
