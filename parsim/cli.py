@@ -35,7 +35,7 @@ import sys
 from pathlib import Path
 
 import parsim
-from parsim.errors import EXIT_RUN_FAILED, EXIT_UNFINISHED, EXIT_USER_ERROR, ParsimError, exit_status
+from parsim.errors import EXIT_RUN_FAILED, EXIT_UNFINISHED, EXIT_USER_ERROR, JobError, ParsimError, exit_status
 
 #: Exit status after Ctrl-C, as the shell gives a process that SIGINT ended.
 EXIT_INTERRUPTED = 128 + signal.SIGINT
@@ -247,12 +247,19 @@ def _validate(args) -> int:
 
 
 def _compile(args) -> int:
-    """Compile (or find in the cache) the kernels of the job's points, or of every solver, on this process."""
-    from parsim.core.cache import kernel_cache_dir
+    """Compile (or find in the cache) the kernels of the job's points, or of every solver, on this process.
+
+    A cache that cannot be written is a JobError (status 2, as an output folder that cannot be written):
+    the command cannot do what it is for, and says so before compiling anything.
+    """
+    from parsim.core.cache import CACHE_REMEDY, cache_problem, kernel_cache_dir
     from parsim.job import Job, load_job
     from parsim.runner import warm_up
     from parsim.solvers import SOLVERS
 
+    problem = cache_problem()
+    if problem is not None:
+        raise JobError(f"{problem}: nothing compiled; {CACHE_REMEDY}")
     if args.job is not None:
         jobs = [load_job(args.job, SOLVERS)]
     else:  # one small job per solver and method, with the defaults

@@ -20,6 +20,7 @@ communicator, any other solver runs on the group's rank 0 while the other
 ranks wait.  The group's rank 0 writes the task file.
 """
 
+import functools
 import signal
 import sys
 import threading
@@ -30,6 +31,7 @@ import h5py
 import numpy as np
 from mpi4py import MPI
 
+from parsim.core.cache import CACHE_REMEDY, cache_problem
 from parsim.errors import JobError, describe_exception
 from parsim.interrupts import ending_on_signals
 from parsim.job import Job, Task
@@ -228,6 +230,9 @@ def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None
         rehearsals.setdefault(repr(sorted(small.items())), small)
     if not rehearsals:
         return
+    problem = cache_problem()
+    if problem is not None and (comm is None or comm.Get_rank() == 0):
+        _say_uncached(problem)
     start = time.perf_counter()
     with announcing_compilation(PREPARING_KERNELS, announce) as compiled:
         _rehearse(solver, rehearsals.values(), announce, comm)
@@ -235,9 +240,17 @@ def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None
         print(f"parsim: kernels ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 
 
+@functools.cache  # once per process, however many warm-ups it runs (the Python API's calls)
+def _say_uncached(problem: str) -> None:
+    print(f"parsim: {problem}: the kernels are compiled in every process, every run; {CACHE_REMEDY} to cache them",
+          file=sys.stderr, flush=True)
+
+
 def _rehearse(solver, rehearsals, announce: bool, comm: MPI.Comm | None) -> None:
-    """Solve each small point of :func:`warm_up` on this rank, the node's first rank before the others."""
-    node = comm.Split_type(MPI.COMM_TYPE_SHARED) if comm is not None and comm.Get_size() > 1 else None
+    """Solve each small point of :func:`warm_up` on this rank, the node's first rank before the others
+    (all at once when the kernels cannot be cached: the others would compile them again anyway)."""
+    several = comm is not None and comm.Get_size() > 1
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED) if several and cache_problem() is None else None
     if node is not None and node.Get_rank() > 0:
         wait_for(node.Ibarrier())  # until the node's first rank has compiled and cached the kernels
     try:
@@ -249,6 +262,7 @@ def _rehearse(solver, rehearsals, announce: bool, comm: MPI.Comm | None) -> None
             wait_for(node.Ibarrier())  # the others go on, to load what it has cached (or to fail as it did)
     if node is not None:
         node.Free()
+    if several:
         wait_for(comm.Ibarrier())  # every rank has its kernels
 
 
