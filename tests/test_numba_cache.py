@@ -29,15 +29,38 @@ print(json.dumps({
 }))
 """
 
+# Read the kernels' wall clock in a fresh process: which of parsim's kernels numba compiled, and the
+# seconds a sleep took by the kernel's clock and by Python's.
+CLOCK_PROBE = """
+import json, time
+from numba.core import event
+from parsim.core.jit import defined_in_core
 
-def probe(tmp_path, **env_overrides):
+compiled = []
+class Seen(event.Listener):
+    def on_start(self, ev):
+        if defined_in_core(ev.data["dispatcher"]):
+            compiled.append(ev.data["dispatcher"].py_func.__qualname__)
+    def on_end(self, ev):
+        pass
+event.register("numba:compile", Seen())
+from parsim.core.sdbd.engine import _wall_clock
+_wall_clock()
+before, start = time.perf_counter(), _wall_clock()
+time.sleep(0.2)
+after, end = time.perf_counter(), _wall_clock()
+print(json.dumps({"compiled": compiled, "kernel": end - start, "python": after - before}))
+"""
+
+
+def probe(tmp_path, code=PROBE, **env_overrides):
     env = {key: value for key, value in os.environ.items()
            if key not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "NUMBA_CACHE_LOCATOR_CLASSES",
                           "NUMBA_DISABLE_JIT")}
     env["HOME"] = str(tmp_path / "home")
     env.update(env_overrides)
     # `python -c` from the repository's root, as a developer would run it
-    done = subprocess.run([sys.executable, "-c", PROBE], cwd=ROOT, env=env, capture_output=True,
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -98,6 +121,15 @@ def test_an_unwritable_numba_cache_dir_is_not_left_for_the_package_folder(tmp_pa
     assert result["hits"] == 0
     assert result["problem"] == f"the kernel cache {blocker / 'numba'} cannot be written ({blocker} is a file)"
     assert cache_files(CORE) == in_package  # numba's own fallback would have written beside the sources
+
+
+def test_the_kernels_wall_clock_loads_from_the_cache(tmp_path):
+    """A kernel reading the wall clock (a deposition's, for ``clock_from_particle``) is cached like any
+    other: the object-mode code of a ``numba.objmode`` block is compiled again in every process, which
+    made every deposition run say that it prepared the kernels.  Its clock runs as Python's."""
+    first, second = (probe(tmp_path, CLOCK_PROBE, XDG_CACHE_HOME=str(tmp_path / "xdg")) for _ in range(2))
+    assert "_wall_clock" in first["compiled"] and second["compiled"] == []
+    assert abs(second["kernel"] - second["python"]) < 0.05, second
 
 
 def test_other_numba_functions_keep_numba_defaults(tmp_path):
