@@ -4,8 +4,9 @@
                                               run (or resume) a job, on one rank or under mpiexec;
                                               K ranks run each task together (default 1)
     parsim validate JOB [--output DIR]        check a job file and its output location, compute nothing
-    parsim compile [JOB]                      compile the kernels a job needs (default: every solver's)
-                                              into the cache, e.g. on a login node before a batch job
+    parsim compile [JOB] [--ranks-per-task K] compile the kernels a job needs (default: every solver's)
+                                              into the cache, e.g. on a login node before a batch job;
+                                              with K > 1 those of tasks spread over K ranks
     parsim info OUTPUT                        what an output folder holds and how far its job got
     parsim plot OUTPUT [--figure NAME] [--out PATH] [--task LABEL]
                                               the papers' figures from a job's outputs, PNG and PDF
@@ -35,7 +36,7 @@ import sys
 from pathlib import Path
 
 import parsim
-from parsim.errors import EXIT_RUN_FAILED, EXIT_UNFINISHED, EXIT_USER_ERROR, ParsimError, exit_status
+from parsim.errors import EXIT_RUN_FAILED, EXIT_UNFINISHED, EXIT_USER_ERROR, JobError, ParsimError, exit_status
 
 #: Exit status after Ctrl-C, as the shell gives a process that SIGINT ended.
 EXIT_INTERRUPTED = 128 + signal.SIGINT
@@ -102,6 +103,9 @@ def _parser() -> argparse.ArgumentParser:
     compile_ = commands.add_parser("compile", help="compile the kernels of a job (default: of every solver) into "
                                                    "numba's cache, so that the runs that follow only load them")
     compile_.add_argument("job", type=Path, nargs="?", help="job file (TOML); without: every solver's kernels")
+    compile_.add_argument("--ranks-per-task", type=_positive, default=1, metavar="K",
+                          help="the kernels of 'parsim run --ranks-per-task K': K > 1 compiles those of tasks spread "
+                               "over several ranks (the same for any K) in place of those of tasks on one rank")
 
     info = commands.add_parser("info", help="describe an output folder")
     info.add_argument("output", type=Path, help="output folder of a job")
@@ -149,6 +153,13 @@ def _reader_gone() -> int:
     except (OSError, ValueError):  # no file descriptor behind sys.stdout: nothing buffered to lose
         pass
     return EXIT_READER_GONE
+
+
+def _positive(text: str) -> int:
+    """A whole number of at least 1, for --ranks-per-task of compile (which has no ranks to divide)."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed: a whole number of at least 1, e.g. 2")
+    return int(text)
 
 
 def _duration(text: str) -> float:
@@ -258,12 +269,20 @@ def _validate(args) -> int:
 
 
 def _compile(args) -> int:
-    """Compile (or find in the cache) the kernels of the job's points, or of every solver, on this process."""
-    from parsim.core.cache import kernel_cache_dir
+    """Compile (or find in the cache) the kernels of the job's points, or of every solver, on this process;
+    with ``--ranks-per-task K`` > 1, those of tasks spread over K ranks (the same for any number of ranks).
+
+    A cache that cannot be written is a JobError (status 2, as an output folder that cannot be written):
+    the command cannot do what it is for, and says so before compiling anything.
+    """
+    from parsim.core.cache import CACHE_REMEDY, cache_problem, kernel_cache_dir
     from parsim.job import Job, load_job
     from parsim.runner import warm_up
     from parsim.solvers import SOLVERS
 
+    problem = cache_problem()
+    if problem is not None:
+        raise JobError(f"{problem}: nothing compiled; {CACHE_REMEDY}")
     if args.job is not None:
         jobs = [load_job(args.job, SOLVERS)]
     else:  # one small job per solver and method, with the defaults
@@ -274,8 +293,10 @@ def _compile(args) -> int:
                               solvers=SOLVERS)
                 for kind in SOLVERS for chosen in points[kind]]
     for job in jobs:
-        warm_up(job, job.tasks(), announce=True)
+        warm_up(job, job.tasks(), announce=True, ranks_per_task=args.ranks_per_task)
     what = f"job '{jobs[0].name}'" if args.job is not None else "every solver"
+    if args.ranks_per_task > 1:
+        what += f" on {args.ranks_per_task} ranks per task"
     print(f"the kernels of {what} are in the cache: {kernel_cache_dir()}")
     return 0
 

@@ -20,6 +20,7 @@ communicator, any other solver runs on the group's rank 0 while the other
 ranks wait.  The group's rank 0 writes the task file.
 """
 
+import functools
 import signal
 import sys
 import threading
@@ -30,6 +31,7 @@ import h5py
 import numpy as np
 from mpi4py import MPI
 
+from parsim.core.cache import CACHE_REMEDY, cache_problem
 from parsim.errors import JobError, describe_exception
 from parsim.interrupts import ending_on_signals
 from parsim.job import Job, Task
@@ -126,7 +128,7 @@ def _run_pending(job: Job, pending: list[Task], folder: OutputFolder, writing: t
     ``progress``: this rank draws the job's bar; ``settling``: this rank's long tasks say how far they got."""
     solver = job.solver
     with phase("warm_up", whole=True):
-        warm_up(job, pending, progress, comm)
+        warm_up(job, pending, progress, comm, ranks_per_task)
     point_costs = [solver.cost(job.point_parameters(point)) for point in range(job.n_points)]
     # Costliest first, so that the last tasks to start are short and no rank idles at the end; every
     # rank sorts alike (a stable sort of the same list), so a task index means the same task everywhere.
@@ -209,13 +211,15 @@ PREPARING_KERNELS = ("parsim: preparing the kernels (compiled once per installat
                      "the cache in about a second afterwards)...")
 
 
-def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None = None) -> None:
+def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None = None,
+            ranks_per_task: int = 1) -> None:
     """Compile, or load from numba's cache, the kernels of the pending tasks before any task is timed.
 
     Each distinct small version of the pending points (:attr:`Solver.warm_up_parameters`)
     is solved once on this rank and thrown away, so that a task's ``wall_time``
-    measures the computation alone.  Kernels that only a decomposed task calls
-    (``--ranks-per-task``) still compile in the first such task.
+    measures the computation alone.  For tasks on groups of ``ranks_per_task`` > 1 ranks,
+    a solver's :attr:`Solver.rehearse_spread` solves it instead, on this rank alone, as a
+    task spread over the group runs (the kernels do not depend on the number of ranks).
 
     With ``comm`` (collective over it), the ranks of each node take turns: the node's first
     rank solves the small points while the others wait, then the others solve them too and
@@ -235,27 +239,47 @@ def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None
         rehearsals.setdefault(repr(sorted(small.items())), small)
     if not rehearsals:
         return
+    problem = cache_problem()
+    if problem is not None and (comm is None or comm.Get_rank() == 0):
+        _say_uncached(problem)
     start = time.perf_counter()
     with announcing_compilation(PREPARING_KERNELS, announce) as compiled:
-        _rehearse(solver, rehearsals.values(), announce, comm)
+        _rehearse(_rehearsal(solver, ranks_per_task), rehearsals.values(), announce, comm)
     if compiled():
         print(f"parsim: kernels ready in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 
 
-def _rehearse(solver, rehearsals, announce: bool, comm: MPI.Comm | None) -> None:
-    """Solve each small point of :func:`warm_up` on this rank, the node's first rank before the others."""
-    node = comm.Split_type(MPI.COMM_TYPE_SHARED) if comm is not None and comm.Get_size() > 1 else None
+@functools.cache  # once per process, however many warm-ups it runs (the Python API's calls)
+def _say_uncached(problem: str) -> None:
+    print(f"parsim: {problem}: the kernels are compiled in every process, every run; {CACHE_REMEDY} to cache them",
+          file=sys.stderr, flush=True)
+
+
+def _rehearsal(solver, ranks_per_task: int):
+    """How :func:`warm_up` solves a small point for tasks on groups of ``ranks_per_task`` ranks."""
+    if ranks_per_task > 1 and solver.rehearse_spread is not None:
+        return solver.rehearse_spread
+    return lambda small: solver.solve(small, np.random.default_rng(0), MPI.COMM_SELF)
+
+
+def _rehearse(rehearsal, rehearsals, announce: bool, comm: MPI.Comm | None) -> None:
+    """Solve each small point of :func:`warm_up` with ``rehearsal`` on this rank, the node's first rank
+    before the others (all at once when the kernels cannot be cached: the others would compile them
+    again anyway)."""
+    several = comm is not None and comm.Get_size() > 1
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED) if several and cache_problem() is None else None
     if node is not None and node.Get_rank() > 0:
         wait_for(node.Ibarrier())  # until the node's first rank has compiled and cached the kernels
     try:
         with announcing_preparation(announce):  # the particles are built here on every rank; rank 0 speaks
             for small in rehearsals:
-                solver.solve(small, np.random.default_rng(0), MPI.COMM_SELF)
+                rehearsal(small)
     finally:
         if node is not None and node.Get_rank() == 0:
             wait_for(node.Ibarrier())  # the others go on, to load what it has cached (or to fail as it did)
     if node is not None:
         node.Free()
+    if several:
         wait_for(comm.Ibarrier())  # every rank has its kernels
 
 

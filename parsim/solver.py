@@ -195,7 +195,12 @@ class Solver:
       of dicts holding the keys each entry sets;
     - ``decomposable``: whether ``solve`` can use a group of several ranks.  A solver
       that cannot always gets a group of one: the runner calls it on the group's rank 0
-      only, and the group's other ranks wait for the next task.
+      only, and the group's other ranks wait for the next task;
+    - ``rehearse_spread(params)``: for a solver whose tasks on several ranks call kernels of
+      their own, the warm-up of ``--ranks-per-task`` in place of solving ``params`` alone:
+      it runs ``params`` on this process as a task spread over several ranks runs, so that
+      its kernels are compiled (or loaded) before any task; None: such tasks call the
+      kernels of a task on one rank.
     """
 
     kind: str
@@ -211,6 +216,7 @@ class Solver:
     solve: Callable[[dict, np.random.Generator, "MPI.Comm"], TaskResult | None]
     decomposable: bool = False
     tables: tuple["TableArray", ...] = ()
+    rehearse_spread: Callable[[dict], None] | None = None
 
     def parameter(self, name: str) -> Parameter:
         return next(p for p in self.parameters if p.name == name)

@@ -17,10 +17,13 @@ def mpiexec() -> str:
     return found
 
 
-def run_mpi(arguments: list[str], ranks: int = 2, timeout: float = 600, cwd=None) -> subprocess.CompletedProcess:
-    """Run ``python ARGUMENTS`` on ``ranks`` ranks; returns the completed process (output captured)."""
+def run_mpi(arguments: list[str], ranks: int = 2, timeout: float = 600, cwd=None,
+            env=None) -> subprocess.CompletedProcess:
+    """Run ``python ARGUMENTS`` on ``ranks`` ranks, in ``env`` (default: this process's environment);
+    returns the completed process (output captured)."""
     command = [mpiexec(), "-n", str(ranks), sys.executable, *arguments]
-    return subprocess.run(command, capture_output=True, text=True, timeout=timeout, cwd=cwd, env=dict(os.environ))
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout, cwd=cwd,
+                          env=dict(os.environ) if env is None else env)
 
 
 def parsim_command(*arguments: str) -> list[str]:

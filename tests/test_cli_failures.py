@@ -195,3 +195,39 @@ def test_nothing_runs_on_after_an_abort_that_returns(tmp_path):
     result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
     assert result.returncode == 3 and "ran on" not in result.stdout
     assert lines(result.stderr) == ["parsim: error: no space left"]
+
+
+def unwritable_cache(tmp_path, below: str):
+    """An environment whose kernel cache cannot be written: XDG_CACHE_HOME at a regular file (``below``
+    empty) or at a folder below one (root may write in a read-only folder, not below a file); the file."""
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    env = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(blocker / below)
+    return env, blocker
+
+
+@pytest.mark.parametrize("below", ["", "cache"])
+@pytest.mark.parametrize("with_job", [True, False])
+def test_compile_into_a_cache_it_cannot_write_is_one_line(job, tmp_path, below, with_job):
+    env, blocker = unwritable_cache(tmp_path, below)
+    result = subprocess.run([sys.executable, "-m", "parsim", "compile", *([str(job)] if with_job else [])],
+                            capture_output=True, text=True, timeout=120, env=env)
+    assert result.returncode == 2 and result.stdout == ""  # nothing compiled, nothing said to be in the cache
+    (line,) = lines(result.stderr)
+    assert line.startswith(f"parsim: error: the kernel cache {blocker / below / 'parsim' / 'numba'}"), line
+    assert f"cannot be written ({blocker} is a file)" in line and "set XDG_CACHE_HOME" in line, line
+
+
+@pytest.mark.mpi
+def test_a_run_without_a_writable_cache_says_so_once_and_runs(job, tmp_path):
+    """Rank 0 alone says that the kernels are compiled in every process, once, --quiet or not; costs the
+    job's kernels compiled on both ranks at once (a 2-D event-driven aggregation: 10-30 s)."""
+    env, blocker = unwritable_cache(tmp_path, "")
+    result = run_mpi(["-m", "parsim", "run", str(job), "--output", str(tmp_path / "out"), "--quiet"], timeout=900,
+                     env=env)
+    assert result.returncode == 0, result.stderr
+    (line,) = error_lines(result.stderr)
+    assert line.startswith(f"parsim: the kernel cache {blocker / 'parsim' / 'numba'}"), line
+    assert "the kernels are compiled in every process" in line and "set XDG_CACHE_HOME" in line, line
+    assert (tmp_path / "out" / "failing.nc").exists()

@@ -15,6 +15,7 @@ PROBE = """
 import json, warnings
 warnings.simplefilter("always")
 with warnings.catch_warnings(record=True) as caught:
+    from parsim.core.cache import cache_problem
     from parsim.core.eventqueue import heap_new
     times, seqs, data = heap_new(4)
 stats = heap_new.stats
@@ -24,18 +25,42 @@ print(json.dumps({
     "misses": sum(stats.cache_misses.values()),
     "shape": list(data.shape),
     "warnings": [str(w.message) for w in caught],
+    "problem": cache_problem(),
 }))
 """
 
+# Read the kernels' wall clock in a fresh process: which of parsim's kernels numba compiled, and the
+# seconds a sleep took by the kernel's clock and by Python's.
+CLOCK_PROBE = """
+import json, time
+from numba.core import event
+from parsim.core.jit import defined_in_core
 
-def probe(tmp_path, **env_overrides):
+compiled = []
+class Seen(event.Listener):
+    def on_start(self, ev):
+        if defined_in_core(ev.data["dispatcher"]):
+            compiled.append(ev.data["dispatcher"].py_func.__qualname__)
+    def on_end(self, ev):
+        pass
+event.register("numba:compile", Seen())
+from parsim.core.sdbd.engine import _wall_clock
+_wall_clock()
+before, start = time.perf_counter(), _wall_clock()
+time.sleep(0.2)
+after, end = time.perf_counter(), _wall_clock()
+print(json.dumps({"compiled": compiled, "kernel": end - start, "python": after - before}))
+"""
+
+
+def probe(tmp_path, code=PROBE, **env_overrides):
     env = {key: value for key, value in os.environ.items()
            if key not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "NUMBA_CACHE_LOCATOR_CLASSES",
                           "NUMBA_DISABLE_JIT")}
     env["HOME"] = str(tmp_path / "home")
     env.update(env_overrides)
     # `python -c` from the repository's root, as a developer would run it
-    done = subprocess.run([sys.executable, "-c", PROBE], cwd=ROOT, env=env, capture_output=True,
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -82,8 +107,29 @@ def test_unwritable_cache_folder_does_not_crash(tmp_path):
     in_package = cache_files(CORE)
     result = probe(tmp_path, XDG_CACHE_HOME=str(blocker / "cache"))
     assert result["shape"] == [4, 5] and result["hits"] == 0
-    assert any("without caching" in message for message in result["warnings"])
+    assert result["warnings"] == []  # the core says nothing: the command line and the runner say it, in one line
+    assert result["problem"].startswith(f"the kernel cache {blocker / 'cache' / 'parsim' / 'numba'}")
+    assert result["problem"].endswith(f"cannot be written ({blocker} is a file)")
     assert cache_files(CORE) == in_package
+
+
+def test_an_unwritable_numba_cache_dir_is_not_left_for_the_package_folder(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    in_package = cache_files(CORE)
+    result = probe(tmp_path, NUMBA_CACHE_DIR=str(blocker / "numba"))
+    assert result["hits"] == 0
+    assert result["problem"] == f"the kernel cache {blocker / 'numba'} cannot be written ({blocker} is a file)"
+    assert cache_files(CORE) == in_package  # numba's own fallback would have written beside the sources
+
+
+def test_the_kernels_wall_clock_loads_from_the_cache(tmp_path):
+    """A kernel reading the wall clock (a deposition's, for ``clock_from_particle``) is cached like any
+    other: the object-mode code of a ``numba.objmode`` block is compiled again in every process, which
+    made every deposition run say that it prepared the kernels.  Its clock runs as Python's."""
+    first, second = (probe(tmp_path, CLOCK_PROBE, XDG_CACHE_HOME=str(tmp_path / "xdg")) for _ in range(2))
+    assert "_wall_clock" in first["compiled"] and second["compiled"] == []
+    assert abs(second["kernel"] - second["python"]) < 0.05, second
 
 
 def test_other_numba_functions_keep_numba_defaults(tmp_path):

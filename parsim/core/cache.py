@@ -25,9 +25,11 @@ kernels are therefore cached per user, outside the package::
 Only functions defined in ``parsim/core`` are concerned (a locator registered in front of
 numba's own); other numba functions in the same process keep numba's defaults.
 ``NUMBA_CACHE_DIR``, when set, takes precedence: the files go where numba puts them
-(``$NUMBA_CACHE_DIR/<folder>_<hash>/``, no per-CPU folder) and numba's own fallbacks apply.
-Without it, if the per-user folder cannot be created or written, the kernels are compiled
-without caching (a warning says so). Deleting the cache folder is always safe.
+(``$NUMBA_CACHE_DIR/<folder>_<hash>/``, no per-CPU folder).
+If the folder cannot be created or written, the kernels are compiled without caching, in every
+process (not in numba's fallback, the package's ``__pycache__``); :func:`cache_problem` says why,
+for the command line and the runner to say (the core prints nothing). Deleting the cache folder
+is always safe.
 """
 
 import functools
@@ -35,16 +37,17 @@ import hashlib
 import os
 import re
 import tempfile
-import warnings
 from pathlib import Path
 
 import numba
 from numba.core import caching, config
 
-__all__ = ["kernel_cache_dir", "cache_usable", "install"]
+__all__ = ["kernel_cache_dir", "cache_problem", "cache_usable", "install", "CACHE_REMEDY"]
 
 #: The folder of parsim's kernels: functions defined in files below it use the locator.
 CORE = Path(__file__).resolve().parent
+#: What to do when the kernels cannot be cached.
+CACHE_REMEDY = "set XDG_CACHE_HOME (or NUMBA_CACHE_DIR) to a writable folder"
 
 
 def _user_cache_home():
@@ -76,26 +79,34 @@ def kernel_cache_dir():
 
 
 @functools.cache
-def cache_usable():
-    """Whether the kernels can be cached; ``False``, with a warning, if the folder is not writable.
-
-    With ``NUMBA_CACHE_DIR`` set, numba decides (and falls back by itself).
+def cache_problem():
+    """Why the kernels cannot be cached, as "the kernel cache FOLDER cannot be written (REASON)", or None
+    when they can; found once per process, by making the folder and a file in it.
     """
-    if config.CACHE_DIR:
-        return True
     try:
         path = kernel_cache_dir()
+    except RuntimeError as error:  # Path.home() without a home
+        return f"the kernel cache has no folder ({error})"
+    try:
         path.mkdir(parents=True, exist_ok=True)
         tempfile.TemporaryFile(dir=path).close()
-    except (OSError, RuntimeError) as error:  # RuntimeError: Path.home() without a home
-        warnings.warn(
-            f"parsim: numba kernels are compiled without caching ({error}); "
-            "set XDG_CACHE_HOME or NUMBA_CACHE_DIR to a writable folder",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-        return False
-    return True
+    except OSError as error:
+        return f"the kernel cache {path} cannot be written ({_obstacle(path, error)})"
+    return None
+
+
+def _obstacle(path, error):
+    """What kept ``path`` from being made or written: a file where a folder should be, else the system's reason
+    (and the folder it names)."""
+    existing = next(folder for folder in (path, *path.parents) if os.path.exists(folder))
+    if not existing.is_dir():
+        return f"{existing} is a file"
+    return f"{error.strerror}: {error.filename}" if error.strerror and error.filename else str(error)
+
+
+def cache_usable():
+    """Whether the kernels can be cached (:func:`cache_problem` found nothing against it)."""
+    return cache_problem() is None
 
 
 @functools.cache

@@ -68,6 +68,7 @@ import math
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from parsim.core import kernel_mpi, sdbd
@@ -268,7 +269,7 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
                      lateral, floor, trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
                      clock_from_particle=-1, wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX,
                      cylinder=None, substrate_positions=None, substrate_radii=None, halo=None,
-                     window_per_rank=None, check=False, jitter=0.0) -> DecomposedDeposition:
+                     window_per_rank=None, check=False, jitter=0.0, rehearsal=False) -> DecomposedDeposition:
     """:func:`deposit_decomposed` of particles that no rank holds all of: ``particle_chunks()`` yields
     ``(particle_shape, particle_scale, particle_rotation, particle_drop_xy)`` of consecutive particles in
     drop order, the same on every rank, and starts again from the first at every call (it is called
@@ -281,7 +282,9 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
     ``clocked_seconds`` (of the gathered result) is the wall-clock time from the round in which
     particle ``clock_from_particle`` was committed to the end (NaN when it is -1).
     With ``check``, every particle's owner fingerprints the sediment its descent read when it settles
-    it and again when it commits it, and raises :class:`DecompositionError` if they differ."""
+    it and again when it commits it, and raises :class:`DecompositionError` if they differ.
+    A ``rehearsal`` (a warm-up, on one rank: the kernels are the same for any number) also compiles, or
+    loads from the cache, the kernels that only several blocks or a fetch call (:meth:`_RankRun.compile_rare`)."""
     settings = dict(trial_angle=trial_angle, cycle_n=cycle_n, cycle_eps=cycle_eps,
                     max_events_per_particle=max_events_per_particle, wall_contact=wall_contact, container=container,
                     cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii)
@@ -306,8 +309,11 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
         surveyed = time.perf_counter() - started
         if window_per_rank is None:
             window_per_rank = default_window(layout, prep, survey.cells.cell[-1])
-        share = _RankRun(comm, own, survey, layout, max(1, int(window_per_rank)) * layout.n_blocks, check,
-                         int(clock_from_particle), float(jitter)).run()
+        run = _RankRun(comm, own, survey, layout, max(1, int(window_per_rank)) * layout.n_blocks, check,
+                       int(clock_from_particle), float(jitter))
+        share = run.run()
+        if rehearsal:
+            run.compile_rare()
         share.tally["survey_seconds"] = surveyed  # reading every particle's inputs, on every rank
         return share
     except BaseException as error:
@@ -520,6 +526,18 @@ class _RankRun:
                                           self.settled_end, self.link, self.counts, self.settles, self.clock)
         return int(outcome), int(particle)
 
+    def compile_rare(self):
+        """Compile, or load from the cache, the kernels that neither a small task nor one rank alone may call,
+        for the types of this run's arguments, without running them: the neighbours' regions (several blocks)
+        and a fetch (:meth:`_fetch_and_settle`; another rank's particles, :meth:`_insert`).  A task that met
+        them first compiled them inside its wall time (settle_again 20 s, insert_parcel 7 s on 2 busy cores)."""
+        nothing = np.zeros(0, dtype=np.int64)
+        _compile_for(blocks.interval_meets, 0.0, 0.0, 0.0, 0.0, self.layout.length, self.periodic)
+        _compile_for(blocks.interval_within, 0.0, 0.0, 0.0, 0.0, self.length[0], self.periodic)
+        _compile_for(survey_kernels.block_owners, np.zeros(0), *self.layout.block_search())
+        _compile_for(rounds.settle_again, *self._settle_again_arguments(0))
+        _compile_for(rounds.insert_parcel, *self._insert_arguments(self._parcel(nothing), 0))
+
     def _owns(self, particle):
         return _holds(self.rows.index, particle)
 
@@ -591,8 +609,11 @@ class _RankRun:
         """Committed particles of other ranks (a :func:`_parcel`) join the local sediment; the present rows
         from ``first_row`` on that they touch are withdrawn."""
         self.grid, self.centre, self.radius, self.key, self.n_used = rounds.insert_parcel(
-            *parcel, first_row, self.rows, self.grid, self.centre, self.radius, self.key, self.n_used,
-            self.settled_end, self.margin, self.n_max, self.settles)
+            *self._insert_arguments(parcel, first_row))
+
+    def _insert_arguments(self, parcel, first_row):
+        return (*parcel, first_row, self.rows, self.grid, self.centre, self.radius, self.key, self.n_used,
+                self.settled_end, self.margin, self.n_max, self.settles)
 
     def _parcel(self, rows):
         """The spheres of ``rows`` as sent to another rank: counts, footprints, keys, wrapped centres, radii."""
@@ -617,10 +638,7 @@ class _RankRun:
                 for source, parcel in enumerate(parts):
                     if source != owner:  # the owner's own particles are in its sediment
                         self._insert(self._not_fetched(parcel), row)
-                prep = self.prep
-                self.grid, self.settled_end = rounds.settle_again(
-                    row, prep.kernel_inputs(), prep.kernel_settings(), self.rows, self.plan, self.grid, self.centre,
-                    self.radius, self.key, self.n_used, self.settled_end, self.margin, self.settles)
+                self.grid, self.settled_end = rounds.settle_again(*self._settle_again_arguments(row))
                 box = self._widened(row, self.margin)
                 done = (blocks.interval_within(box[0], box[1], region[0], region[1], self.length[0], self.periodic)
                         or _box_within(box, extent, self.length, self.periodic))
@@ -628,6 +646,11 @@ class _RankRun:
             done, extent, stopped = self.comm.bcast(message, root=owner)
             if done:
                 return stopped
+
+    def _settle_again_arguments(self, row):
+        prep = self.prep
+        return (row, prep.kernel_inputs(), prep.kernel_settings(), self.rows, self.plan, self.grid, self.centre,
+                self.radius, self.key, self.n_used, self.settled_end, self.margin, self.settles)
 
     def _widened(self, row, by):
         box = self.rows.rectangle[row]
@@ -693,6 +716,11 @@ class _RankRun:
                                     rows.com[kept], rows.rotation[kept], rows.contacts[kept], rows.state[kept],
                                     rows.events[kept], rows.steps[kept], rows.count[kept], rows.spheres[spheres],
                                     self.radius[slots].copy(), stopped_at, clocked_seconds, tally)
+
+
+def _compile_for(kernel, *arguments) -> None:
+    """Compile ``kernel``, or load it from the cache, for the types of ``arguments``, as a call with them would."""
+    kernel.compile(tuple(numba.typeof(argument) for argument in arguments))
 
 
 def _holds(ascending, value) -> bool:

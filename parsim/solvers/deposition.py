@@ -558,17 +558,28 @@ def _particle_chunks(params, species, geometry, rng, chunk):
     return chunks
 
 
-def _solve_spread(comm, params, inputs: DepositionInputs) -> TaskResult:
+def rehearse_spread(params: dict) -> None:
+    """Solve the small point ``params`` on this process alone as a task spread over several ranks is solved,
+    compiling or loading every kernel such a task calls (those of several blocks and of fetches included):
+    the warm-up of ``--ranks-per-task``.  A process of one rank compiles them for any number of ranks."""
+    from mpi4py import MPI
+
+    _solve_spread(MPI.COMM_SELF, params, deposition_inputs(params, np.random.default_rng(0), spread=True),
+                  rehearsal=True)
+
+
+def _solve_spread(comm, params, inputs: DepositionInputs, rehearsal: bool = False) -> TaskResult:
     """The task on the ranks of ``comm``: the sediment, bitwise the serial one, stays spread over them
     and no rank holds every particle; each rank returns the statistics, reduced over the ranks, and
-    its share of the configuration."""
+    its share of the configuration.  ``rehearsal``: see :func:`rehearse_spread`."""
     from mpi4py import MPI
 
     from parsim.parallel.deposition import deposit_streamed
     from parsim.parallel.deposition_statistics import measure_decomposed
 
     with phase("steps"):  # the survey of the particles' inputs is a phase of its own
-        share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options)
+        share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options,
+                                 rehearsal=rehearsal)
     _check_sediment(params, share.stopped_at,
                     comm.allreduce(bool(np.all(np.isfinite(share.positions))), op=MPI.LAND))
     own = Drops(share.particle_shape, share.particle_scale)
@@ -678,4 +689,4 @@ SOLVER = Solver(kind="deposition", description="steepest descent ballistic depos
                 "(Topic & Poeschel 2016)", parameters=PARAMETERS, statistics=statistics.STATISTICS,
                 coordinates=statistics.coordinates, check=check, cost=cost, memory=memory, memory_keys=memory_keys,
                 warm_up_parameters=warm_up_parameters, solve=solve, decomposable=True,
-                tables=(SPECIES_TABLE, LAYERS_TABLE))
+                tables=(SPECIES_TABLE, LAYERS_TABLE), rehearse_spread=rehearse_spread)

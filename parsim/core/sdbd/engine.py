@@ -48,8 +48,8 @@ events, the sediment and its grid, and the run's settings.
 import math
 import time
 
-import numba
 import numpy as np
+from numba import types
 
 from parsim.core.growth import with_rows
 from parsim.core.jit import jit
@@ -449,9 +449,17 @@ def _record_trace(row, motion, n_c_before, k, m, window, phi, n_t, com, n_c, con
         row[11 + l] = contacts.sediment[l] if ob == OB_SPHERE else -ob
 
 
-@jit(nogil=False)  # it takes the GIL for the interpreter call anyway
+#: clock_gettime(2) of the C library, called by its name: the cached machine code holds no address of the process
+#: (a ``numba.objmode`` call of ``time.perf_counter`` would be compiled again in every process, numba caching no
+#: object-mode code)
+_clock_gettime = types.ExternalFunction("clock_gettime", types.int32(types.int32, types.voidptr))
+#: The clock of ``time.perf_counter`` on Linux: monotonic, from an arbitrary origin.
+_MONOTONIC = time.CLOCK_MONOTONIC
+
+
+@jit
 def _wall_clock():
-    """``time.perf_counter()`` from inside a kernel (a short excursion to the interpreter)."""
-    with numba.objmode(now="float64"):
-        now = time.perf_counter()
-    return now
+    """Seconds of the monotonic clock, read from inside a kernel."""
+    spec = np.zeros(2, dtype=np.int64)  # struct timespec: tv_sec, tv_nsec, 64-bit each on 64-bit Linux and macOS
+    _clock_gettime(_MONOTONIC, spec.ctypes)
+    return spec[0] + 1e-9 * spec[1]
