@@ -88,7 +88,7 @@ def _parser() -> argparse.ArgumentParser:
                      help="run each task on a group of K ranks (a divisor of the number of ranks; default 1): "
                           "time-stepping aggregation and deposition tasks are decomposed over the group, "
                           "event-driven aggregation tasks run on the group's first rank while the others wait")
-    run.add_argument("--phase-times", type=Path, metavar="FILE",
+    run.add_argument("--phase-times", type=_file_to_write, metavar="FILE",
                      help="write, as JSON, each rank's seconds by phase of the run (reading the job, warm-up, each "
                           "task's initial condition, steps, statistics, task file and row, the dataset)")
     run.add_argument("--time-limit", type=_duration, metavar="[D-]HH:MM:SS",
@@ -169,6 +169,16 @@ def _duration(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r}: allowed: HH:MM:SS or D-HH:MM:SS, e.g. 23:50:00")
     days, hours, minutes, seconds = (int(match[part] or 0) for part in ("days", "hours", "minutes", "seconds"))
     return ((days * 24 + hours) * 60 + minutes) * 60.0 + seconds
+
+
+def _file_to_write(text: str) -> Path:
+    """A file a command writes when it ends, checked before it starts: a path, not a folder, in a
+    folder that exists and takes files (so that nothing computed is lost for want of it)."""
+    path = Path(text)
+    folder = path.parent
+    if path.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed: a file in a folder that exists and can be written")
+    return path
 
 
 def _run(args) -> int:

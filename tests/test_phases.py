@@ -8,6 +8,7 @@ import pytest
 
 from parsim import phases
 from parsim.phases import phase, phase_times
+from tests.datasets import run_serial
 from tests.mpi import parsim_command, run_mpi_bounded
 
 #: a small spread deposition: every phase of a task, the survey included, on 2 ranks
@@ -76,3 +77,15 @@ def test_a_spread_task_run_reports_every_rank_by_phase(tmp_path):
         assert sum(times["seconds"].values()) <= times["wall"] <= seconds
         assert all(value >= 0.0 for value in times["seconds"].values())
 
+
+
+@pytest.mark.parametrize("where", ["missing/phases.json", "."])
+def test_a_phase_file_that_cannot_be_written_is_refused_before_the_run(tmp_path, where):
+    """A path in a folder that does not exist, or a folder: one line naming --phase-times, status 2, no
+    output folder (the run would compute every task and then fail to write the file)."""
+    job = tmp_path / "phased.toml"
+    job.write_text(DEPOSITION)
+    result = run_serial("run", str(job), "--output", str(tmp_path / "out"), "--phase-times", str(tmp_path / where))
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and "--phase-times" in lines[0], result.stderr
+    assert not (tmp_path / "out").exists()

@@ -226,6 +226,14 @@ def test_the_task_option_picks_the_pictured_task(aggregation_output, tmp_path, c
     assert "no task file" in capsys.readouterr().err
 
 
+def test_an_unknown_task_is_refused_before_any_figure_is_drawn(aggregation_output, tmp_path, capsys):
+    out = tmp_path / "figures"
+    assert main(["plot", str(aggregation_output), "--task", "0123456789abcdef_r0000", "--out", str(out)]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "no task file" in error[0] and "--task" in error[0], error
+    assert not out.exists()
+
+
 def test_a_cluster_in_3d_is_rendered(aggregation_output, tmp_path):
     path = tmp_path / "p0000_r0000.h5"
     configuration = disc_chain(np.random.default_rng(1), dimension=3)

@@ -39,6 +39,8 @@ def plot_output(output: Path, figure: str | None = None, out: Path | None = None
     ``figure`` asks for one: then :class:`PlotError` says what is missing.  Returns the files written.
     """
     dataset_path, tasks = _locate(Path(output))
+    if task is not None:
+        _task_file(tasks, task)  # a task that is not there is refused before any figure is drawn
     dataset = _open(dataset_path)
     lacking = "the finished tasks lack" if COMPLETED in dataset.data_vars else "the dataset lacks"
     folder = dataset_path.parent / FIGURE_FOLDER
