@@ -30,19 +30,18 @@ as SIGPIPE ends ``cat``.
 
 import argparse
 import os
-import re
 import signal
 import sys
 from pathlib import Path
 
 import parsim
+from parsim import options
 from parsim.errors import EXIT_RUN_FAILED, EXIT_UNFINISHED, EXIT_USER_ERROR, JobError, ParsimError, exit_status
 
 #: Exit status after Ctrl-C, as the shell gives a process that SIGINT ended.
 EXIT_INTERRUPTED = 128 + signal.SIGINT
 #: Exit status when the reader of standard output has gone, as the shell gives a process that SIGPIPE ended.
 EXIT_READER_GONE = 128 + signal.SIGPIPE
-DURATION = re.compile(r"(?:(?P<days>\d+)-)?(?P<hours>\d+):(?P<minutes>\d\d):(?P<seconds>\d\d)")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -81,50 +80,50 @@ def _parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     run = commands.add_parser("run", help="run or resume a job (use mpiexec -n K for K ranks)")
-    run.add_argument("job", type=Path, help="job file (TOML)")
-    run.add_argument("--output", type=Path, help="output folder (overrides the job's 'output')")
+    run.add_argument("job", type=options.path, help="job file (TOML)")
+    run.add_argument("--output", type=options.path, help="output folder (overrides the job's 'output')")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--ranks-per-task", type=int, default=1, metavar="K",
                      help="run each task on a group of K ranks (a divisor of the number of ranks; default 1): "
                           "time-stepping aggregation and deposition tasks are decomposed over the group, "
                           "event-driven aggregation tasks run on the group's first rank while the others wait")
-    run.add_argument("--phase-times", type=_file_to_write, metavar="FILE",
+    run.add_argument("--phase-times", type=options.file_to_write, metavar="FILE",
                      help="write, as JSON, each rank's seconds by phase of the run (reading the job, warm-up, each "
                           "task's initial condition, steps, statistics, task file and row, the dataset)")
-    run.add_argument("--time-limit", type=_duration, metavar="[D-]HH:MM:SS",
+    run.add_argument("--time-limit", type=options.duration, metavar="[D-]HH:MM:SS",
                      help="stop handing out tasks in time for the tasks under way to end and the (partial) dataset "
                           "to be written before this much time has passed, e.g. a batch job's limit minus a margin; "
                           "the same command continues the job (exit status 3 while tasks are left)")
 
     validate = commands.add_parser("validate", help="check a job file and its output location without computing")
-    validate.add_argument("job", type=Path)
-    validate.add_argument("--output", type=Path, help="output folder (overrides the job's 'output')")
+    validate.add_argument("job", type=options.path)
+    validate.add_argument("--output", type=options.path, help="output folder (overrides the job's 'output')")
 
     compile_ = commands.add_parser("compile", help="compile the kernels of a job (default: of every solver) into "
                                                    "numba's cache, so that the runs that follow only load them")
-    compile_.add_argument("job", type=Path, nargs="?", help="job file (TOML); without: every solver's kernels")
-    compile_.add_argument("--ranks-per-task", type=_positive, default=1, metavar="K",
+    compile_.add_argument("job", type=options.path, nargs="?", help="job file (TOML); without: every solver's kernels")
+    compile_.add_argument("--ranks-per-task", type=options.ranks, default=1, metavar="K",
                           help="the kernels of 'parsim run --ranks-per-task K': K > 1 compiles those of tasks spread "
                                "over several ranks (the same for any K) in place of those of tasks on one rank")
 
     info = commands.add_parser("info", help="describe an output folder")
-    info.add_argument("output", type=Path, help="output folder of a job")
+    info.add_argument("output", type=options.path, help="output folder of a job")
 
     plot = commands.add_parser("plot", help="draw figures of a job's outputs as PNG and PDF")
-    plot.add_argument("output", type=Path, help="output folder of a job, or its netCDF dataset")
+    plot.add_argument("output", type=options.path, help="output folder of a job, or its netCDF dataset")
     plot.add_argument("--figure", metavar="NAME",
                       help="draw this figure only (default: every figure the dataset supports, in OUTPUT/figures)")
-    plot.add_argument("--out", type=Path, metavar="PATH",
+    plot.add_argument("--out", type=options.path, metavar="PATH",
                       help="with --figure: the file to write, PATH.png and PATH.pdf (or PATH itself if it ends in "
                            ".png or .pdf, and the other format); without: the folder for every figure")
-    plot.add_argument("--task", metavar="LABEL",
+    plot.add_argument("--task", type=options.name, metavar="LABEL",
                       help="the task the pictures show (sediment, cluster): its file name in OUTPUT/tasks without .h5; "
                       "default: the job's first task that has one")
 
     collect = commands.add_parser("collect", help="write the dataset of the tasks finished so far (the job may be "
                                   "running: collect takes no lock and writes beside the job's dataset)")
-    collect.add_argument("output", type=Path, help="output folder of a job")
-    collect.add_argument("--out", type=Path, metavar="PATH",
+    collect.add_argument("output", type=options.path, help="output folder of a job")
+    collect.add_argument("--out", type=options.path, metavar="PATH",
                          help="the netCDF file to write (default: OUTPUT/NAME.partial.nc)")
 
     add_export_command(commands)
@@ -153,32 +152,6 @@ def _reader_gone() -> int:
     except (OSError, ValueError):  # no file descriptor behind sys.stdout: nothing buffered to lose
         pass
     return EXIT_READER_GONE
-
-
-def _positive(text: str) -> int:
-    """A whole number of at least 1, for --ranks-per-task of compile (which has no ranks to divide)."""
-    if not text.isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: allowed: a whole number of at least 1, e.g. 2")
-    return int(text)
-
-
-def _duration(text: str) -> float:
-    """Seconds of a batch-system time, [D-]HH:MM:SS (Slurm's form), for --time-limit."""
-    match = DURATION.fullmatch(text)
-    if match is None or int(match["minutes"]) >= 60 or int(match["seconds"]) >= 60:
-        raise argparse.ArgumentTypeError(f"{text!r}: allowed: HH:MM:SS or D-HH:MM:SS, e.g. 23:50:00")
-    days, hours, minutes, seconds = (int(match[part] or 0) for part in ("days", "hours", "minutes", "seconds"))
-    return ((days * 24 + hours) * 60 + minutes) * 60.0 + seconds
-
-
-def _file_to_write(text: str) -> Path:
-    """A file a command writes when it ends, checked before it starts: a path, not a folder, in a
-    folder that exists and takes files (so that nothing computed is lost for want of it)."""
-    path = Path(text)
-    folder = path.parent
-    if path.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"{text!r}: allowed: a file in a folder that exists and can be written")
-    return path
 
 
 def _run(args) -> int:

@@ -256,10 +256,17 @@ def _say_uncached(problem: str) -> None:
 
 
 def _rehearsal(solver, ranks_per_task: int):
-    """How :func:`warm_up` solves a small point for tasks on groups of ``ranks_per_task`` ranks."""
-    if ranks_per_task > 1 and solver.rehearse_spread is not None:
-        return solver.rehearse_spread
-    return lambda small: solver.solve(small, np.random.default_rng(0), MPI.COMM_SELF)
+    """How :func:`warm_up` solves a small point for tasks on groups of ``ranks_per_task`` ranks, and
+    prepares the solver's rare kernels."""
+    def rehearsal(small: dict) -> None:
+        if ranks_per_task > 1 and solver.rehearse_spread is not None:
+            solver.rehearse_spread(small)
+        else:
+            solver.solve(small, np.random.default_rng(0), MPI.COMM_SELF)
+        if solver.rare_kernels is not None:
+            solver.rare_kernels(small)
+
+    return rehearsal
 
 
 def _rehearse(rehearsal, rehearsals, announce: bool, comm: MPI.Comm | None) -> None:

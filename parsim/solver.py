@@ -200,7 +200,9 @@ class Solver:
       their own, the warm-up of ``--ranks-per-task`` in place of solving ``params`` alone:
       it runs ``params`` on this process as a task spread over several ranks runs, so that
       its kernels are compiled (or loaded) before any task; None: such tasks call the
-      kernels of a task on one rank.
+      kernels of a task on one rank;
+    - ``rare_kernels(params)``: compiles, or loads, after the warm-up's solve of ``params``, the
+      kernels of paths a small point seldom reaches; None: there are none.
     """
 
     kind: str
@@ -217,6 +219,7 @@ class Solver:
     decomposable: bool = False
     tables: tuple["TableArray", ...] = ()
     rehearse_spread: Callable[[dict], None] | None = None
+    rare_kernels: Callable[[dict], None] | None = None
 
     def parameter(self, name: str) -> Parameter:
         return next(p for p in self.parameters if p.name == name)

@@ -13,7 +13,8 @@ import sys
 
 import pytest
 
-from parsim.cli import _duration, main
+from parsim.cli import main
+from parsim.options import duration
 from parsim.output.folder import OutputFolder
 from parsim.job import parse_job
 from parsim.solvers import SOLVERS
@@ -146,7 +147,7 @@ def test_info_into_a_closed_pipe_ends_quietly(job, tmp_path):
 @pytest.mark.parametrize("limit", ["-00:00:05", "-1-00:00:00", "1--00:00:05", "1-", "+1-00:00:00"])
 def test_a_negative_or_malformed_time_limit_is_refused(limit):
     with pytest.raises(Exception, match="allowed: HH:MM:SS or D-HH:MM:SS"):
-        _duration(limit)
+        duration(limit)
 
 
 def test_a_negative_time_limit_is_one_line(job, capsys):

@@ -6,7 +6,8 @@ deposition of spheres compiles whatever its tasks on one rank still lack, ``pars
 --ranks-per-task 2`` then whatever spread tasks lack, and the runs after each must compile nothing.
 Cost: at most the two compilations, 1.8-3.8 and 2.6-3.3 minutes on 2 cores of an AMD EPYC shared with
 other work (2026-12), which the suite's other deposition tests then load instead of compiling; every
-other command takes seconds.
+other command takes seconds.  A short time-stepping task tiled over 2 ranks must compile nothing after
+its warm-up either.
 """
 
 import os
@@ -112,13 +113,42 @@ sys.exit(status)
 """
 
 
-@pytest.mark.mpi
-def test_a_spread_run_warms_up_the_kernels_of_spread_tasks(cache):
+def spread_run(cache, job: str, output: str):
+    """``parsim run JOB --ranks-per-task 2`` on 2 ranks by :data:`SPREAD_RUN`: its standard error's lines."""
     script = cache.root / "spread_run.py"
     script.write_text(SPREAD_RUN)
-    run = run_mpi([str(script), "run", cache.job, "--output", str(cache.root / "warmed"), "--ranks-per-task", "2"],
+    run = run_mpi([str(script), "run", job, "--output", str(cache.root / output), "--ranks-per-task", "2"],
                   timeout=1800, env=cache.env)
     assert run.returncode == 0, run.stderr
-    lines = run.stderr.splitlines()
-    assert lines.count("warm-up: 1 spread loop") == 2, run.stderr  # on each rank, before the tasks
-    assert lines.count("tasks compiled: []") == 2, run.stderr
+    return run.stderr.splitlines()
+
+
+@pytest.mark.mpi
+def test_a_spread_run_warms_up_the_kernels_of_spread_tasks(cache):
+    lines = spread_run(cache, cache.job, "warmed")
+    assert lines.count("warm-up: 1 spread loop") == 2, lines  # on each rank, before the tasks
+    assert lines.count("tasks compiled: []") == 2, lines
+
+
+# Time stepping in tiles over 2 ranks, a few steps long: the warm-up's small point must still reach the
+# minimiser, the refresh of its candidate pairs and the pairs across ranks.
+TILED_JOB = """
+name = "tiled"
+kind = "aggregation"
+seed = 1
+realizations = 1
+[parameters]
+method = "ts"
+dimension = 2
+n_spheres = 20000
+volume_fraction = 0.3
+max_events = 3
+"""
+
+
+@pytest.mark.mpi
+def test_a_short_tiled_time_stepping_task_compiles_nothing_after_the_warm_up(cache):
+    job = cache.root / "tiled.toml"
+    job.write_text(TILED_JOB)
+    lines = spread_run(cache, str(job), "tiled")
+    assert lines.count("tasks compiled: []") == 2, lines

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from parsim.core.statistics import (
+    DEFAULT_N_MAX,
     aspect_ratio_and_orientation,
     box_counts,
     cluster_statistics,
@@ -176,6 +177,32 @@ def test_pair_distribution_matches_brute_force(d):
     r_values = np.array([0.0, 0.3, 0.7, 1.0, 1.0, 2.5, 4.0, 20.0])
     np.testing.assert_allclose(pair_distribution(x, r_values), brute_force_pair_distribution(x, r_values))
     assert pair_distribution(x, [20.0])[0] == len(x)  # every sphere within reach, itself included
+
+
+def test_pair_counts_equal_a_count_of_every_pair_on_random_configurations():
+    """300 random configurations: uniform, on a coarse lattice (many distances exactly on a grid value), and
+    random walks; 1 to 300 spheres over 10^-3 to 10^3; random r grids (negative values and repeats
+    included) and the paper's.  Every count of eqs. 4.6 and 4.7 is the count of d^2 <= r^2 over all
+    ordered pairs, exactly."""
+    rng = np.random.default_rng(2026)
+    for case in range(300):
+        d, n, scale = int(rng.integers(2, 4)), int(rng.integers(1, 301)), 10 ** rng.uniform(-3, 3)
+        x = [rng.uniform(0, scale, (n, d)), np.round(rng.uniform(0, 12, (n, d))) * scale / 12,
+             np.cumsum(rng.normal(0, scale / 50, (n, d)), axis=0)][case % 3]
+        radius = scale / 20 * rng.uniform(0.5, 2)
+        r = np.sort(rng.uniform(-radius, 25 * radius, int(rng.integers(1, 80))))
+        r = pair_distribution_grid(radius, int(rng.integers(1, 100))) if case % 4 == 0 else np.repeat(r, 1 + case % 2)
+        squared = ((x[:, None, :] - x[None, :, :]) ** 2).sum(axis=-1)
+        pairs = np.array([(squared <= v * v).sum() if v >= 0 else 0 for v in r])
+        np.testing.assert_array_equal(pair_distribution(x, r), pairs / n, err_msg=f"case {case}")
+        contact = 2.1 * radius
+        contacts = (squared <= contact * contact).sum()
+        assert relative_contact_number(x, radius) == contacts / (n * DEFAULT_N_MAX[d]), f"case {case}"
+        if n >= 2:
+            stats = cluster_statistics(x, np.full(n, radius), x.min(0), x.min(0) + 64 * radius + np.ptp(x),
+                                       r_values=r, box_levels=3)
+            assert stats["contact_number"] == relative_contact_number(x, radius)
+            np.testing.assert_array_equal(stats["pair_distribution"], pair_distribution(x, r))
 
 
 def test_pair_distribution_of_far_apart_clusters():

@@ -4,7 +4,7 @@ import pytest
 import xarray as xr
 from mpi4py import MPI
 
-from parsim.cli import _duration
+from parsim.options import duration
 from parsim.parallel.scheduler import TimeLimit, run_tasks
 from tests.datasets import reproducible_part, run_serial, small_aggregation_job
 from tests.mpi import parsim_command, run_mpi
@@ -37,11 +37,11 @@ def test_tasks_start_while_the_longest_so_far_ends_before_the_reserve():
 
 
 def test_batch_times_are_read_as_slurm_writes_them():
-    assert _duration("23:50:00") == 23 * 3600 + 50 * 60
-    assert _duration("1-00:00:30") == 86430
+    assert duration("23:50:00") == 23 * 3600 + 50 * 60
+    assert duration("1-00:00:30") == 86430
     for wrong in ("90", "1:60:00", "12:00", "-1-00:00:00", "a:b:c"):
         with pytest.raises(Exception, match="allowed: HH:MM:SS or D-HH:MM:SS"):
-            _duration(wrong)
+            duration(wrong)
 
 
 @pytest.mark.mpi

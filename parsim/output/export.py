@@ -37,6 +37,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 import parsim
+from parsim import options
 from parsim.errors import JobError, OutputError
 from parsim.output.atomic import written_atomically
 from parsim.output.voxels import image_grid, write_voxels
@@ -449,9 +450,10 @@ def _make_folder(folder: Path) -> None:
 def add_export_command(subparsers) -> None:
     """Declare ``parsim export`` on the command line's ``subparsers``; :func:`run_export` runs it."""
     export = subparsers.add_parser("export", help="write task files for OVITO, ParaView, LAMMPS, YADE, ASE")
-    export.add_argument("output", type=Path, help="output folder of a job")
+    export.add_argument("output", type=options.path, help="output folder of a job")
     which = export.add_mutually_exclusive_group()
-    which.add_argument("--task", metavar="LABEL", help="the task to export, its file name in OUTPUT/tasks "
+    which.add_argument("--task", type=options.name, metavar="LABEL",
+                       help="the task to export, its file name in OUTPUT/tasks "
                        "without .h5 (default: the job's first task that has one)")
     which.add_argument("--all", action="store_true", help="export every task (vtk: with a .pvd collection)")
     export.add_argument("--format", required=True, metavar="FORMAT",
@@ -461,7 +463,7 @@ def add_export_command(subparsers) -> None:
     export.add_argument("--height", type=float, metavar="H",
                         help="format voxels: the image's height above the floor (default: the top of the highest "
                              "sphere)")
-    export.add_argument("--out", metavar="PATH",
+    export.add_argument("--out", type=options.target, metavar="PATH",
                         help="the file to write, or a folder to write LABEL.suffix in (an existing folder, DIR/ "
                              "or a name without a suffix; default OUTPUT/export); with --all, the folder "
                              "(default OUTPUT/export)")

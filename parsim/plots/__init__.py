@@ -17,8 +17,9 @@ from parsim.errors import PlotError, first_sentence
 from parsim.output.collect import COMPLETED
 from parsim.output.dataset import check_dataset_schema
 from parsim.output.folder import JOB_COPY, TASKS, open_output, task_files
+from parsim.output.location import check_output_location
 from parsim.plots import aggregation, deposition
-from parsim.plots.common import REALIZATION, FigureSpec, save
+from parsim.plots.common import REALIZATION, FigureSpec, image_paths, save
 
 FIGURES_BY_KIND = {"aggregation": aggregation.FIGURES, "deposition": deposition.FIGURES}
 FIGURES: dict[str, FigureSpec] = {name: spec for figures in FIGURES_BY_KIND.values() for name, spec in figures.items()}
@@ -46,8 +47,11 @@ def plot_output(output: Path, figure: str | None = None, out: Path | None = None
     folder = dataset_path.parent / FIGURE_FOLDER
     if figure is not None:
         spec = _lookup(figure)
-        return _draw(spec, dataset, tasks, task, Path(out) if out is not None else folder / spec.name, report)
+        target = Path(out) if out is not None else folder / spec.name
+        _check_writable(image_paths(target)[0].parent, out)
+        return _draw(spec, dataset, tasks, task, target, report)
     folder = Path(out) if out is not None else folder
+    _check_writable(folder, out)
     written = []
     for spec in FIGURES_BY_KIND.get(dataset.attrs.get(JOB_KIND), FIGURES).values():
         missing = spec.missing(dataset)
@@ -59,6 +63,14 @@ def plot_output(output: Path, figure: str | None = None, out: Path | None = None
         except PlotError as error:  # a picture without its task file
             report(f"skipped {spec.name}: {error}")
     return written
+
+
+def _check_writable(folder: Path, out: Path | None) -> None:
+    """Refuse, before a figure is drawn, a ``folder`` for the figures that cannot be made or written."""
+    if out is not None:
+        check_output_location(folder, role="--out", remedy="give another --out")
+    else:
+        check_output_location(folder, role="figures folder", remedy="give a folder that can be written with --out")
 
 
 def _draw(spec: FigureSpec, dataset: xr.Dataset, tasks: Path, task: str | None, target: Path,

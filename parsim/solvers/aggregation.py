@@ -25,6 +25,7 @@ from parsim.core.initial import (box_length_for_volume_fraction, isotropic_veloc
                                  lattice_sites_per_side, lattice_spacing, uniform_cube_velocities)
 from parsim.core.statistics import MIN_FIT_BOX_SIZES, cluster_statistics, fit_box_sizes, pair_distribution_grid
 from parsim.core.ts import FORMULATIONS, DahaParameters, MinimiserFailure, simulate_ts
+from parsim.core.ts.rare import compile_rare_kernels
 from parsim.errors import JobError, NumericalError
 from parsim.parameters import LARGEST_QUANTITY, REQUIRED, Parameter
 from parsim.phases import phase
@@ -244,13 +245,16 @@ def warm_up_parameters(params: dict) -> dict:
     spheres whose box holds the box sizes of the fit of D_f, or N if that is fewer.
 
     A full lattice of at most N spheres fits wherever N does (condition 4.2), and its box
-    grows with its side, so the warm-up point passes :func:`check` when the point does.
+    grows with its side, so the warm-up point passes :func:`check` when the point does.  It runs to
+    one cluster whatever the point's ``max_time`` and ``max_events``, so that it meets collisions,
+    minimisations and merges, and compiles their kernels, even for a task of a few time steps.
     """
     n, d = params["n_spheres"], params["dimension"]
     side = WARM_UP_SIDE[d]
     while side ** d < n and not _fits_fractal_dimension({**params, "n_spheres": side ** d}):
         side += 1
-    return {**params, "n_spheres": min(n, side ** d)}
+    until_one_cluster = {"max_time": math.inf, "max_events": next(p.default for p in PARAMETERS if p.name == "max_events")}
+    return {**params, "n_spheres": min(n, side ** d), **until_one_cluster}
 
 
 @dataclass
@@ -283,23 +287,23 @@ def daha_parameters(params: dict) -> DahaParameters:
         sleep_tolerance=params["daha_sleep_tolerance"])
 
 
-def _domain(comm: "MPI.Comm", length: float, dimension: int):
-    """The tile decomposition of the box over ``comm``; None (serial) on one rank."""
-    if comm.Get_size() == 1:
+def _domain(comm: "MPI.Comm", length: float, dimension: int, tiled: bool):
+    """The tile decomposition of the box over ``comm``; None (serial) on one rank unless ``tiled``."""
+    if comm.Get_size() == 1 and not tiled:
         return None
     from parsim.parallel.tiled import DecomposedDomain  # here, so that `parsim validate` never initialises MPI
 
     return DecomposedDomain(comm, length, dimension)
 
 
-def _run_ts(params, positions, velocities, radii, masses, length, comm: "MPI.Comm") -> _Run:
+def _run_ts(params, positions, velocities, radii, masses, length, comm: "MPI.Comm", tiled: bool) -> _Run:
     try:
         result = simulate_ts(positions, velocities, radii, masses, length,
                              time_step_factor=params["time_step_factor"], formulation=params["formulation"],
                              daha=daha_parameters(params),
                              attraction_range=params["attraction_range"] * params["radius"],
                              max_time=params["max_time"], max_steps=params["max_events"],
-                             domain=_domain(comm, length, params["dimension"]))
+                             domain=_domain(comm, length, params["dimension"], tiled))
     except MinimiserFailure as failure:
         raise NumericalError(f"time stepping: {failure}") from None
     reason = "max_events" if result.stop_reason == "max_steps" else result.stop_reason
@@ -316,8 +320,9 @@ def _run_ed(params, positions, velocities, radii, masses, length) -> _Run:
                 np.ones(0))
 
 
-def solve(params: dict, rng: np.random.Generator, comm: "MPI.Comm") -> TaskResult | None:
-    """One task on the ranks of ``comm``; the result is on its rank 0, the other ranks return None."""
+def solve(params: dict, rng: np.random.Generator, comm: "MPI.Comm", tiled: bool = False) -> TaskResult | None:
+    """One task on the ranks of ``comm``; the result is on its rank 0, the other ranks return None.
+    ``tiled``: time stepping in tiles even on one rank, as on several (see :func:`rehearse_spread`)."""
     leader = comm.Get_rank() == 0
     if params["method"] == "ed" and not leader:
         return None  # ED is serial: the group's rank 0 computes it
@@ -334,7 +339,7 @@ def solve(params: dict, rng: np.random.Generator, comm: "MPI.Comm") -> TaskResul
 
     with phase("steps"):
         if params["method"] == "ts":
-            run = _run_ts(params, positions, velocities, radii, masses, length, comm)
+            run = _run_ts(params, positions, velocities, radii, masses, length, comm, tiled)
         else:
             run = _run_ed(params, positions, velocities, radii, masses, length)
     if not leader:
@@ -371,7 +376,25 @@ def solve(params: dict, rng: np.random.Generator, comm: "MPI.Comm") -> TaskResul
     return TaskResult(statistics, configuration)
 
 
+def rehearse_spread(params: dict) -> None:
+    """Solve the small point ``params`` on this process alone as a task on several ranks is solved: time
+    stepping in tiles (the kernels of tiles, ghosts and their pair lists, which a serial run never calls),
+    event-driven as on one rank.  The warm-up of ``--ranks-per-task``: the kernels are the same for any
+    number of ranks."""
+    from mpi4py import MPI
+
+    solve(params, np.random.default_rng(0), MPI.COMM_SELF, tiled=True)
+
+
+def rare_kernels(params: dict) -> None:
+    """Compile, or load, the time-stepping kernels that the warm-up's small point may not reach
+    (:mod:`parsim.core.ts.rare`)."""
+    if params["method"] == "ts":
+        compile_rare_kernels(params["dimension"])
+
+
 SOLVER = Solver(kind="aggregation", description="ballistic aggregation of hard spheres (Degond et al. 2024)",
                 parameters=PARAMETERS, statistics=STATISTICS, coordinates=coordinates, check=check,
                 cost=cost, memory=memory, memory_keys=memory_keys, warm_up_parameters=warm_up_parameters,
-                solve=solve, decomposable=True)
+                solve=solve, decomposable=True, rehearse_spread=rehearse_spread,
+                rare_kernels=rare_kernels)
