@@ -5,6 +5,8 @@ folder (``XDG_CACHE_HOME``; ``NUMBA_CACHE_DIR`` is removed from the environment)
 
 - ``deposition``: ``parsim.deposit(20, seed=1, box_length=5.0, packing_samples=1000)`` in
   ``python -c``, the first deposition of a user (it compiles the deposition's kernels);
+- ``run``: ``parsim run`` of a job of one deposition of 20 spheres (the same point) on one
+  process, into a temporary folder: the first run of a user's own deposition job;
 - ``quickstart``: ``mpiexec -n 2 parsim run jobs/quickstart.toml`` into a temporary folder,
   the quick start; its line "parsim: kernels ready in X s" is reported too.
 
@@ -14,7 +16,7 @@ mpiexec), the largest resident memory of one process (``wait4``) and the largest
 the process tree (sampled every 0.1 s: both ranks compiling at once).  The load average
 before each run is printed: other processes on the machine lengthen the wall times.
 
-    python benchmarks/compile.py [--repeat 2] [--only deposition|quickstart] [--ranks 2]
+    python benchmarks/compile.py [--repeat 2] [--only deposition|run|quickstart] [--ranks 2]
                                  [--no-warm] [--kernels 15] [--keep-cache]
 
 ``--kernels N`` lists the N costliest compilations of each cold run (self seconds: a
@@ -37,6 +39,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 QUICKSTART = ROOT / "jobs" / "quickstart.toml"
 DEPOSITION = "import parsim; parsim.deposit(20, seed=1, box_length=5.0, packing_samples=1000)"
+RUN_JOB = """
+name = "first"
+kind = "deposition"
+seed = 1
+realizations = 1
+[parameters]
+n_particles = 20
+box_length = 5.0
+packing_samples = 1000
+"""
+WORKLOADS = ("deposition", "run", "quickstart")
 PAGE = os.sysconf("SC_PAGE_SIZE")
 
 # Run in the measured process before the workload when --kernels is given: records every
@@ -138,6 +151,8 @@ def workload(name, ranks, profile):
     if name == "deposition":
         return [sys.executable, "-c", prefix + DEPOSITION]
     run = "import sys; from parsim.cli import main; sys.exit(main(sys.argv[1:]))"
+    if name == "run":
+        return [sys.executable, "-c", prefix + run]
     return ["mpiexec", "-n", str(ranks), sys.executable, "-c", prefix + run]
 
 
@@ -146,10 +161,14 @@ def run_workload(name, cache, scratch, ranks, profile):
     env["XDG_CACHE_HOME"] = str(cache)
     env["PARSIM_COMPILE_PROFILE"] = str(scratch / "profile.json")
     command = workload(name, ranks, profile)
-    if name == "quickstart":
+    if name in ("run", "quickstart"):
         output = scratch / "output"
         shutil.rmtree(output, ignore_errors=True)
-        command += ["run", str(QUICKSTART), "--output", str(output)]
+        job = QUICKSTART
+        if name == "run":
+            job = scratch / "first.toml"
+            job.write_text(RUN_JOB)
+        command += ["run", str(job), "--output", str(output)]
     with open("/proc/loadavg") as f:
         load = float(f.read().split()[0])
     result = measure(command, env, scratch)
@@ -182,8 +201,8 @@ def summary(label, runs):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=2, help="cold runs of each workload, each in an empty cache")
-    parser.add_argument("--only", choices=["deposition", "quickstart"], action="append",
-                        help="run this workload only (repeatable; default both)")
+    parser.add_argument("--only", choices=WORKLOADS, action="append",
+                        help="run this workload only (repeatable; default all three)")
     parser.add_argument("--ranks", type=int, default=2, help="ranks of the quick start (default 2)")
     parser.add_argument("--no-warm", action="store_true", help="skip the warm starts")
     parser.add_argument("--kernels", type=int, default=0, metavar="N",
@@ -191,7 +210,7 @@ def main(argv=None):
     parser.add_argument("--keep-cache", action="store_true", help="keep the temporary folders (printed)")
     args = parser.parse_args(argv)
 
-    names = args.only or ["deposition", "quickstart"]
+    names = args.only or list(WORKLOADS)
     results = {(name, kind): [] for name in names for kind in ("cold", "warm")}
     for repetition in range(args.repeat):
         for name in names:

@@ -357,7 +357,7 @@ def _rest_state(n_c, obstacles):
     return HANGING_ONE
 
 
-@jit(inline="always")
+@jit
 def join_sediment(j, x, y, z, r, sediment, grid, key):
     """Sphere ``j`` (centre ``x, y, z`` wrapped into a periodic box, radius ``r``) joins the
     sediment and the grid: the newest of its cell, or with ``key`` (not empty) in the order of

@@ -89,7 +89,7 @@ POLICY_NEW = 0
 POLICY_TRUSTED = 1
 
 
-@jit(inline="always")
+@jit
 def arc_frame(x, pivot, axis, e1, e2):
     """Circle of ``x`` about the axis: returns ``(h, rho)`` and writes ``e1, e2``.
 

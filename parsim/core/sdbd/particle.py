@@ -21,7 +21,7 @@ from parsim.core.sdbd.rotation import (
 __all__ = ["place_spheres", "drop_particle", "rotate_particle"]
 
 
-@jit(inline="always")
+@jit
 def place_spheres(n, particle):
     """Sphere centres ``com + R body`` of the particle's ``n`` spheres."""
     body = particle.body
@@ -33,7 +33,7 @@ def place_spheres(n, particle):
             pos[i, k] = com[k] + rot[k, 0] * body[i, 0] + rot[k, 1] * body[i, 1] + rot[k, 2] * body[i, 2]
 
 
-@jit(inline="always")
+@jit
 def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                   particle_rotation, particle_drop_xy, sediment, grid, ell, particle, reads, given_top):
     """Particle ``p`` at its drop: scaled body offsets and radii, orientation (from

@@ -93,7 +93,7 @@ def side_gap_in_box(geom, k, r, x0, x1, y0, y1):
     return geom[s + 2] - r - far
 
 
-@jit(inline="always")
+@jit
 def candidate_sides(geom, n_sides, x0, x1, y0, y1, reach):
     """The sides that a sphere centred anywhere in the rectangle ``[x0, x1] x [y0, y1]`` can
     come within ``reach`` (its radius and a tolerance) of: ``(first, count)``, the sides
