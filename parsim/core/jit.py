@@ -15,8 +15,9 @@ GIL release and the floating-point model are decided here once:
 ``jit(inline="always")`` inlines a kernel into its callers in numba's IR, a copy at every call
 site: it is kept for small functions on the paths of every event, where a call through numba's
 calling convention cost up to 25 % of a deposition's time.  Functions called once per particle
-are plain calls: inlined, they made the first deposition's compilation 8 s longer (66.6 s
-against 58.6 s on one core of an AMD EPYC, 2026-12) for no measurable speed.
+in the serial deposition, and the event window's compaction, are plain calls: inlined, they
+made the first deposition's compilation 8 s longer (66.6 s against 58.6 s on one core of an AMD
+EPYC, 2026-12) for no measurable speed.
 
 While numba compiles a kernel of :mod:`parsim.core`, Python's cyclic garbage collector runs
 less often (:class:`CompilationCollector`): numba's compiler keeps millions of Python objects

@@ -271,7 +271,7 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
     return buf
 
 
-@jit  # a call would reference-count its dozen arrays and bundles, per particle
+@jit(inline="always")  # a call would reference-count its dozen arrays and bundles, per particle
 def _settle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation,
             particle_drop_xy, sediment, grid, ell, particle, work, history, settings, events, trace, buf, periodic,
             given_top):
