@@ -15,7 +15,8 @@ import pytest
 from mpi4py import MPI
 
 from parsim.core.celllist import cell_index
-from parsim.parallel.decomposition import Decomposition, balanced_boundaries, block_of_tiles, even_boundaries
+from parsim.core.celllist import block_owners
+from parsim.parallel.decomposition import Decomposition, balanced_boundaries, even_boundaries
 from parsim.parallel.halo import HaloPlan
 from parsim.parallel.migration import migrate
 from tests.mpi import run_mpi
@@ -55,9 +56,34 @@ def test_tiles_follow_the_cell_rule_of_the_solver():
     assert linear.tolist() == [cell_index(points, i, 3.0 / 7, 7) for i in range(len(points))]
 
 
-def test_block_of_tiles_puts_a_boundary_tile_in_the_upper_block():
-    boundaries = np.array([0, 3, 8])
-    assert block_of_tiles(np.array([0, 2, 3, 7]), boundaries).tolist() == [0, 0, 1, 1]
+def test_a_boundary_tile_belongs_to_the_upper_block():
+    boundaries = np.array([[0, 3, 8]])
+    points = (np.array([0, 2, 3, 7]) + 0.5)[:, None]  # in tiles 0, 2, 3 and 7 of side 1
+    assert block_owners(points, 1.0, 8, boundaries, np.array([2]), np.array([5, 9])).tolist() == [5, 5, 9, 9]
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_block_owners_follow_the_tile_and_block_rules(dimension):
+    """Random rank grids, tile splits and points (inside, on tile edges, outside the box): the
+    owner is the rank table's entry at the blocks ``searchsorted`` finds for the points' tiles
+    (:meth:`Decomposition.tile_indices`).  300 random cases."""
+    rng = np.random.default_rng(dimension)
+    for _ in range(150):
+        k = int(rng.integers(1, 12))
+        dims = rng.integers(1, min(k, 4) + 1, size=dimension)
+        splits = [np.concatenate([[0], np.sort(rng.choice(np.arange(1, k), parts - 1, replace=False)), [k]])
+                  for parts in dims]
+        boundaries = np.zeros((dimension, dims.max() + 1), dtype=np.int64)
+        for axis, split in enumerate(splits):
+            boundaries[axis, :split.size] = split
+        table = rng.permutation(int(np.prod(dims))).reshape(dims)
+        length = float(rng.uniform(0.5, 5.0))
+        points = rng.uniform(-0.5 * length, 1.5 * length, (64, dimension))
+        points[:8] = rng.integers(0, k + 1, (8, dimension)) * (length / k)  # on tile edges
+        tiles = one_rank(dimension, tiles=k, box_length=length).tile_indices(points)
+        blocks = tuple(np.searchsorted(splits[a], tiles[:, a], side="right") - 1 for a in range(dimension))
+        owners = block_owners(points, length / k, k, boundaries, dims.astype(np.int64), table.ravel())
+        assert owners.tolist() == table[blocks].tolist()
 
 
 def test_even_boundaries_differ_by_at_most_one_tile():

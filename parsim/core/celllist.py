@@ -25,6 +25,7 @@ __all__ = [
     "move_to_cell",
     "block_cells",
     "cells_over",
+    "block_owners",
     "worst_overlap",
 ]
 
@@ -90,6 +91,33 @@ def cell_index(x, i, side, k):
         c += q * mult
         mult *= k
     return c
+
+
+@jit
+def block_owners(x, side, k, boundaries, dims, owner_of_block):
+    """The owner of each point of ``x`` when the grid's cells are cut into blocks: along axis
+    ``a`` the cell index of :func:`cell_index`'s rule (clamped) lies in block ``b`` of the
+    ``dims[a]`` if ``boundaries[a, b] <= index < boundaries[a, b + 1]``, and
+    ``owner_of_block`` names the owner of each block, numbered in C order (the last axis
+    fastest).  Raises ValueError on a coordinate that is not finite.
+
+    One pass over the points: the same rule with numpy's floor, clamp and searchsorted took
+    2.6 ms for 125 000 discs, as long as the time step's free flight."""
+    n, d = x.shape
+    owners = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        block = 0
+        for a in range(d):
+            value = x[i, a]
+            if not math.isfinite(value):
+                raise ValueError("positions: every coordinate must be finite")
+            q = int(min(math.floor(value / side), k - 1)) if value > 0.0 else 0
+            b = 0
+            while b + 1 < dims[a] and boundaries[a, b + 1] <= q:
+                b += 1
+            block = block * dims[a] + b
+        owners[i] = owner_of_block[block]
+    return owners
 
 
 @jit

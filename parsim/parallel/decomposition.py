@@ -22,6 +22,8 @@ import numbers
 import numpy as np
 from mpi4py import MPI
 
+from parsim.core.celllist import block_owners
+
 SUPPORTED_DIMENSIONS = (2, 3)
 
 
@@ -80,6 +82,9 @@ class Decomposition:
         for axis, split in enumerate(splits):
             _check_boundaries(split, self.dims[axis], self.tiles_per_side, axis)
         self.tile_splits = splits
+        self._boundaries = np.zeros((self.dimension, max(self.dims) + 1), dtype=np.int64)
+        for axis, split in enumerate(splits):
+            self._boundaries[axis, :split.size] = split
         self.tile_start = np.array([splits[a][c] for a, c in enumerate(self.coords)], dtype=np.int64)
         self.tile_stop = np.array([splits[a][c + 1] for a, c in enumerate(self.coords)], dtype=np.int64)
         self.lower, self.upper = self.bounds_of(self.rank)
@@ -104,9 +109,11 @@ class Decomposition:
 
     def owner_of(self, positions) -> np.ndarray:
         """The rank owning each position (int64, shape ``(n,)``); outside the box: the nearest edge tile."""
-        tiles = self.tile_indices(positions)
-        grid = tuple(block_of_tiles(tiles[:, a], self.tile_splits[a]) for a in range(self.dimension))
-        return self._rank_at[grid]
+        positions = np.asarray(positions, dtype=np.float64)
+        if positions.ndim != 2 or positions.shape[1] != self.dimension:
+            raise ValueError(f"positions: need shape (n, {self.dimension}), got {positions.shape}")
+        return block_owners(positions, self.tile_side, self.tiles_per_side, self._boundaries,
+                            np.array(self.dims, dtype=np.int64), self._rank_at.ravel())
 
     # load balance ---------------------------------------------------------------------
 
@@ -237,11 +244,6 @@ def balanced_boundaries(weights, parts: int) -> np.ndarray:
         boundaries.append(first + int(np.argmin(np.abs(candidates - total * j / parts))))
     boundaries.append(tiles)
     return np.array(boundaries, dtype=np.int64)
-
-
-def block_of_tiles(tiles: np.ndarray, boundaries: np.ndarray) -> np.ndarray:
-    """Index of the rank block (along one axis) holding each tile index."""
-    return np.searchsorted(boundaries, tiles, side="right") - 1
 
 
 def _project_on_axis(weights: np.ndarray, axis: int) -> np.ndarray:

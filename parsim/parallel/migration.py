@@ -43,7 +43,9 @@ def migrate(decomposition: Decomposition, global_id, arrays: dict, owner=None) -
     axis is ``n`` and must hold ``"position"`` of shape ``(n, d)``; ``owner``, if given, is
     ``decomposition.owner_of`` of the positions.  The records kept and received are returned
     sorted by global id, with the dtypes they came with.  Collective; on one rank the inputs
-    come back sorted and nothing is communicated.  Only the records that leave are packed and
+    come back sorted and nothing is communicated, and on a rank where no record leaves or
+    arrives the sorted inputs themselves come back (the stepper then keeps what it built on
+    its rows).  Only the records that leave are packed and
     sent: with 500 000 records per rank on 2 ranks, a few thousand leaving (N = 10^6 after a
     free flight), a migration takes 45-50 ms instead of 75-90 ms sending them all, to itself too.
     """
@@ -55,14 +57,18 @@ def migrate(decomposition: Decomposition, global_id, arrays: dict, owner=None) -
     leaving = np.flatnonzero(~stays)
     by_owner = leaving[np.argsort(owner[leaving], kind="stable")]
     send_counts = np.bincount(owner[leaving], minlength=decomposition.size)
+    receive_counts = np.empty(decomposition.size, dtype=np.int64)
+    decomposition.comm.Alltoall(send_counts.astype(np.int64), receive_counts)
+    if leaving.size == 0 and receive_counts.sum() == 0 and _ascending(global_id):
+        return global_id, arrays  # nothing moves: a time step's flight, mostly, in a late stage always
     columns = _column_layout(arrays)
     floats, integers = _pack(global_id, arrays, columns, by_owner)
-    received_floats, receive_counts = decomposition.alltoallv_rows(floats, send_counts)
+    received_floats, _ = decomposition.alltoallv_rows(floats, send_counts, receive_counts)
     received_integers, _ = decomposition.alltoallv_rows(integers, send_counts, receive_counts)
     arrived_id, arrived = _unpack(received_floats, received_integers, columns)
     kept = np.flatnonzero(stays)
     return _sorted_by_id(np.concatenate([global_id[kept], arrived_id]),
-                         {key: np.concatenate([value[kept], arrived[key]]) for key, value in arrays.items()})
+                         {key: np.concatenate([_rows(value, kept), arrived[key]]) for key, value in arrays.items()})
 
 
 def _checked_records(decomposition, global_id, arrays) -> tuple[np.ndarray, dict]:
@@ -86,9 +92,19 @@ def _checked_records(decomposition, global_id, arrays) -> tuple[np.ndarray, dict
     return global_id.astype(np.int64, copy=False), arrays
 
 
+def _ascending(global_id: np.ndarray) -> bool:
+    return bool(np.all(global_id[1:] > global_id[:-1]))
+
+
 def _sorted_by_id(global_id: np.ndarray, arrays: dict) -> tuple[np.ndarray, dict]:
     order = np.argsort(global_id, kind="stable")
-    return global_id[order], {key: value[order] for key, value in arrays.items()}
+    return global_id[order], {key: _rows(value, order) for key, value in arrays.items()}
+
+
+def _rows(values: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``values[rows]`` along the first axis: ``np.take`` copies 125 000 rows of two floats in
+    0.24 ms, indexing in 1.1 ms."""
+    return np.take(values, rows, axis=0)
 
 
 def _column_layout(arrays: dict) -> list[_Column]:

@@ -22,7 +22,7 @@ import numpy as np
 from parsim.core.celllist import cells_over, grid_size
 from parsim.core.jit import jit
 from parsim.core.ts.contacts import _distance_sq, _sorted_by_cell, _with_pair
-from parsim.core.ts.quiet import time_to_contact
+from parsim.core.ts.quiet import time_between
 
 #: The search looks this much farther, relatively: the spheres' positions are rounded at
 #: every flight, so the frame's shift matches each sphere's own only to within round-off.
@@ -85,14 +85,14 @@ def _segment_distance_sq(P, s, a, b):
 
 
 @jit
-def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned_rows, binned_X, binned_R, largest,
-                            first, side, k):
-    """The earliest time within ``duration`` at which a query, flying straight at ``V_q``,
-    touches a binned row, all of which fly at the velocity of row ``reference``; ``inf`` if none
-    does.  Each query's path in the frame is cut into pieces at most a cell long, and the cells
-    around each piece are scanned: a row the path touches lies within ``R_q + R_j`` of it.  The
-    frame's positions select the candidates, the times come from ``X`` and ``V``
-    (:func:`parsim.core.ts.quiet.time_to_contact`)."""
+def _first_contact_in_frame(QX, QV, QR, queries, duration, X, V, R, reference, shift, binned_rows, binned_X,
+                            binned_R, largest, first, side, k):
+    """The earliest time within ``duration`` at which a query (a row of ``QX, QV, QR``), flying
+    straight, touches a binned row of ``X, V, R``, all of which fly at the velocity of row
+    ``reference``; ``inf`` if none does.  Each query's path in the frame is cut into pieces at
+    most a cell long, and the cells around each piece are scanned: a row the path touches lies
+    within ``R_q + R_j`` of it.  The frame's positions select the candidates, the times come
+    from the rows' positions and velocities (:func:`parsim.core.ts.quiet.time_between`)."""
     d = X.shape[1]
     start = np.empty(d)
     end = np.empty(d)
@@ -100,20 +100,20 @@ def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned
     for q in queries:
         length = 0.0
         for a in range(d):
-            length += (V[q, a] - V[reference, a]) ** 2
+            length += (QV[q, a] - V[reference, a]) ** 2
         length = math.sqrt(length) * duration
         pieces = max(1, int(math.ceil(length / side)))
-        reach = (R[q] + largest) * (1.0 + ROUNDING_PAD)
+        reach = (QR[q] + largest) * (1.0 + ROUNDING_PAD)
         for piece in range(pieces):
             for a in range(d):
-                u = V[q, a] - V[reference, a]
-                start[a] = X[q, a] - shift[a] + u * duration * piece / pieces
-                end[a] = X[q, a] - shift[a] + u * duration * (piece + 1) / pieces
+                u = QV[q, a] - V[reference, a]
+                start[a] = QX[q, a] - shift[a] + u * duration * piece / pieces
+                end[a] = QX[q, a] - shift[a] + u * duration * (piece + 1) / pieces
             for c in cells_over(np.minimum(start, end) - reach, np.maximum(start, end) + reach, side, k):
                 for s in range(first[c], first[c + 1]):
-                    padded = (R[q] + binned_R[s]) * (1.0 + ROUNDING_PAD)
+                    padded = (QR[q] + binned_R[s]) * (1.0 + ROUNDING_PAD)
                     if _segment_distance_sq(binned_X, s, start, end) <= padded * padded:
-                        earliest = min(earliest, time_to_contact(X, V, R, q, binned_rows[s]))
+                        earliest = min(earliest, time_between(QX, QV, QR, q, X, V, R, binned_rows[s]))
     return earliest
 
 
@@ -147,14 +147,17 @@ class ClusterFrame:
         return _pairs_in_frame(X, R, queries, reach, self._shift(X), self._binned_rows, self._binned_X, self._binned_R,
                                self._largest, self._first, self.side, self.k)
 
-    def first_contact(self, X, V, R, queries, duration):
+    def first_contact(self, X, V, R, queries, duration, query_rows=None):
         """The earliest time within ``duration`` at which one of the rows ``queries`` touches a
         row of the frame, every row flying straight (the frame's rows at one velocity); ``inf``
-        if none does."""
+        if none does.  The queries are rows of ``X, V, R`` (the rows' positions, velocities and
+        radii now), or of ``query_rows``, another such triple."""
         if self.rows.size == 0:
             return math.inf
-        return _first_contact_in_frame(X, V, R, queries, duration, self.rows[0], self._shift(X), self._binned_rows,
-                                       self._binned_X, self._binned_R, self._largest, self._first, self.side, self.k)
+        QX, QV, QR = (X, V, R) if query_rows is None else query_rows
+        return _first_contact_in_frame(QX, QV, QR, queries, duration, X, V, R, self.rows[0], self._shift(X),
+                                       self._binned_rows, self._binned_X, self._binned_R, self._largest, self._first,
+                                       self.side, self.k)
 
     def _shift(self, X):
         """How far the frame's rows have moved since they were binned."""

@@ -26,10 +26,11 @@ contact searches that would find nothing.  While the watch holds, it also answer
 contact search of each time step, and the look-aheads after it.  Once the largest cluster holds
 more than half the spheres, a watch is searched from the spheres outside it, the largest
 cluster's own being kept binned in its moving frame until the next merge
-(:mod:`parsim.core.ts.frame`).  With few spheres outside it (``PATH_QUERIES``) and on one
-process, a look-ahead keeps no watch: it follows their straight paths through that frame to
-the first possible contact, up to the next wall reflection, and the step after a quiet
-stretch finds its contacts in the frame.
+(:mod:`parsim.core.ts.frame`).  With few spheres outside it (``PATH_QUERIES``), a look-ahead
+keeps no watch: it follows their straight paths through that frame to the first possible
+contact, up to the next wall reflection, and the step after a quiet stretch finds its contacts
+in the frame.  Over several processes each follows the paths of all of them (gathered, a few
+hundred rows) through the frame of its own rows of the largest cluster.
 
 Formulations.  ``"non_rigid"`` (section 3.1): every sphere of the interacting clusters
 moves and every link attracts (eq. 3.5).  ``"almost_rigid"`` (section 3.3): only the
@@ -116,8 +117,8 @@ QUIET_PAIRS_PER_SPHERE = 64.0
 QUIET_HORIZON_BOX_FRACTION = 1.0 / 8.0
 
 
-#: With at most this many spheres outside the largest cluster (and on one process), the
-#: look-aheads follow their straight paths through its frame instead of keeping a watch.
+#: With at most this many spheres outside the largest cluster, the look-aheads follow their
+#: straight paths through its frame instead of keeping a watch.
 PATH_QUERIES = 1024
 
 #: Spheres of one cluster whose distances to a wall differ by less than this (times L) count as
@@ -318,17 +319,32 @@ class _Run:
 
     def _follows_paths(self, largest):
         """Whether the look-aheads follow the paths of the few spheres outside the largest
-        cluster through its frame, with no watch (one process, at most ``PATH_QUERIES`` of them)."""
-        return self.domain.size == 1 and largest.holds_most and largest.outside.size <= PATH_QUERIES
+        cluster through its frame, with no watch (at most ``PATH_QUERIES`` of them, on all
+        processes)."""
+        return largest.holds_most and self.n - largest.size <= PATH_QUERIES
 
     def _steps_before_contact(self, largest, duration, dt):
         """Steps of length ``dt`` before any two spheres of different clusters, flying straight,
         can touch, looked at over ``duration``: the paths of the spheres outside the largest
-        cluster through its frame, and every pair of them."""
+        cluster (of every process) through the frame of its owned rows, and every pair of them."""
         frame = largest.frame(self.X, self.R, self._frame_cutoff(), self.L)
-        first = min(frame.first_contact(self.X, self.V, self.R, largest.outside, duration),
-                    first_contact_among(self.X, self.V, self.R, self.own_cluster, largest.outside))
+        X, V, R, cluster, queries = self._outside_rows(largest)
+        first = min(frame.first_contact(self.X, self.V, self.R, queries, duration, query_rows=(X, V, R)),
+                    first_contact_among(X, V, R, cluster, queries))
+        first = self.domain.min(first)
         return steps_before(first, dt) if first < math.inf else math.inf
+
+    def _outside_rows(self, largest):
+        """The spheres outside the largest cluster, of every process: ``(X, V, R, cluster labels,
+        their rows)``; on one process its own arrays (no copies), else the rows gathered (one
+        gather of positions, velocities and global ids)."""
+        if self.domain.size == 1:
+            return self.X, self.V, self.R, self.own_cluster, largest.outside
+        outside = largest.outside
+        rows = self.domain.gather(np.column_stack([self.X[outside], self.V[outside], self.global_id[outside]]))
+        ids = rows[:, -1].astype(np.int64)  # exact: global ids are far below 2^53
+        return (np.ascontiguousarray(rows[:, :self.d]), np.ascontiguousarray(rows[:, self.d:2 * self.d]),
+                self.R_all[ids], self.cluster[ids], np.arange(ids.size))
 
     def _frame_cutoff(self):
         """The search distance the largest cluster's frame is binned for: that of the longest
