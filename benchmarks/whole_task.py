@@ -14,6 +14,13 @@ rank's.
 The table gives per phase the seconds on 1 and 2 ranks and their ratio, and the remainder outside
 the steps in seconds per 10⁶ spheres: what a whole run keeps serial, beside the steps it shares.
 
+The projection to 4, 8 and 16 ranks is Amdahl's law fitted to the two runs: of the steps' seconds
+on one rank, ``s = 2 T_2 - T_1`` did not shrink on two ranks and the rest divides among the
+ranks; everything outside the steps stays what it was on two ranks.  It assumes the shared part
+keeps dividing evenly, which ``benchmarks/tiles.py``'s counts and model support for the
+time-stepping steps (efficiency 0.95 on 16 ranks at 10⁶ discs) and
+``benchmarks/parallel_deposition.py``'s for the spread rounds.
+
     python benchmarks/whole_task.py --case ts --spheres 250000 [--steps 3] [--repeat 2]
     python benchmarks/whole_task.py --case deposition --spheres 200000 [--box 120]
     python benchmarks/whole_task.py --case ts --spheres 250000 --steps 0    # to one cluster
@@ -107,6 +114,19 @@ def table(one: dict, two: dict, spheres: int) -> str:
     return "\n".join(lines)
 
 
+def projection(one: dict, two: dict, ranks=(2, 4, 8, 16)) -> str:
+    """Whole-process and step seconds projected on ``ranks`` (see the module's docstring)."""
+    kept = max(2.0 * two["steps"] - one["steps"], 0.0)  # the steps' seconds that did not divide
+    outside = two["whole process"] - two["steps"]
+    lines = ["| ranks | steps (s) | steps speedup | whole process (s) | whole speedup |", "|--:|--:|--:|--:|--:|"]
+    for k in ranks:
+        steps = kept + (one["steps"] - kept) / k
+        whole = outside + steps
+        lines.append(f"| {k} | {steps:.2f} | {one['steps'] / steps:.2f} | {whole:.2f} | "
+                     f"{one['whole process'] / whole:.2f} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--case", choices=("ts", "deposition"), default="ts")
@@ -126,6 +146,7 @@ def main(argv=None) -> int:
         figures = {ranks: best([by_phase(run(job, work / f"out_{ranks}_{k}", ranks)) for k in range(args.repeat)])
                    for ranks in (1, 2)}
     print(table(figures[1], figures[2], args.spheres))
+    print("\nprojected (Amdahl's law fitted to the 1- and 2-rank runs):\n" + projection(figures[1], figures[2]))
     if args.json:
         args.json.write_text(json.dumps({"arguments": vars(args) | {"json": str(args.json)}, "figures": figures},
                                         indent=1))
