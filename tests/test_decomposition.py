@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from parsim.core.celllist import cell_index
-from parsim.core.celllist import block_owners
+from parsim.core.celllist import block_owners, cell_index
 from parsim.parallel.decomposition import Decomposition, balanced_boundaries, even_boundaries
 from parsim.parallel.halo import HaloPlan
 from parsim.parallel.migration import migrate
-from tests.mpi import run_mpi
+from tests.mpi import run_mpi, run_mpi_bounded
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 PROBE = str(REPOSITORY / "tests" / "scripts" / "decomposition_probe.py")
+MIGRATION_PROBE = str(REPOSITORY / "tests" / "scripts" / "migration_probe.py")
 
 
 def one_rank(dimension=2, tiles=4, box_length=1.0):
@@ -215,3 +215,15 @@ def test_several_ranks_match_one_rank(ranks, dimension, one_rank_probe, tmp_path
     serial = one_rank_probe(dimension)
     for name in ("id", "mass", "velocity"):
         assert np.array_equal(decomposed[name], serial[name]), name
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [3, 4])
+def test_random_migrations_keep_every_record_with_its_owner(ranks):
+    """200 random rounds per rank count: none, a few, most or all records move, often from a few
+    ranks only, so that some ranks exchange while others neither send nor receive.  Every rank
+    must end each round with exactly the records it owns, sorted, payloads intact, and no round
+    may leave the ranks at different collectives (a hang, bounded here)."""
+    done, _ = run_mpi_bounded([MIGRATION_PROBE, "200", str(ranks)], bound=120, ranks=ranks, cwd=REPOSITORY)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "OK 200" in done.stdout
