@@ -93,8 +93,9 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
             with phase("dataset"):
                 outputs = on_root(comm, lambda: _write_outputs(job, folder, comm.Get_size(), ranks_per_task))
             if progress and rank == 0 and done:
+                ranks = f"{comm.Get_size()} rank" + ("s" if comm.Get_size() > 1 else "")
                 print(f"parsim: {done} tasks in {computing:.1f} s ({done / computing:.0f} tasks/s on "
-                      f"{comm.Get_size()} ranks), dataset written in {time.perf_counter() - start:.1f} s",
+                      f"{ranks}), dataset written in {time.perf_counter() - start:.1f} s",
                       file=sys.stderr, flush=True)
             return outputs
     finally:
