@@ -97,13 +97,19 @@ def apply_reflections(X, V, cluster, where, shift, sign):
     Each sphere finds its cluster's rows in a table over the labels up to the largest reflected
     one: a binary search per sphere and axis made a late stage's reflections of one cluster of
     250 000 spheres cost 1.4 ms each."""
-    n, d = X.shape
+    apply_reflections_to(X, V, cluster, where, shift, sign, np.arange(X.shape[0]))
+
+
+@jit
+def apply_reflections_to(X, V, cluster, where, shift, sign, rows):
+    """:func:`apply_reflections` for the spheres ``rows`` only."""
+    d = X.shape[1]
     if where.shape[0] == 0:
         return
     row = np.full((where[:, 0].max() + 1) * d, -1, dtype=np.int64)  # per (cluster, axis), -1: not reflected
     for r in range(where.shape[0]):
         row[where[r, 0] * d + where[r, 1]] = r
-    for i in range(n):
+    for i in rows:
         if cluster[i] * d < row.shape[0]:
             for a in range(d):
                 r = row[cluster[i] * d + a]

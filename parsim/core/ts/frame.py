@@ -22,6 +22,7 @@ import numpy as np
 from parsim.core.celllist import cells_over, grid_size
 from parsim.core.jit import jit
 from parsim.core.ts.contacts import _distance_sq, _sorted_by_cell, _with_pair
+from parsim.core.ts.deferred import catch_up
 from parsim.core.ts.quiet import time_between
 
 #: The search looks this much farther, relatively: the spheres' positions are rounded at
@@ -38,13 +39,14 @@ CELLS_PER_SPHERE = 4
 
 
 @jit
-def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R, largest, first, side, k):
+def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R, largest, first, side, k, log):
     """Pairs ``(q, j)``, ``q`` in ``queries``, ``j`` in ``binned_rows`` (sorted cell by cell,
     those of cell ``c`` being ``binned_rows[first[c]:first[c + 1]]``, binned at ``binned_X``,
     radii ``binned_R`` of at most ``largest``), with a gap ``|X_q - X_j| - R_q - R_j <= reach``.
     Each query scans the cells within its search distance of ``X_q - shift``; the frame's
     positions select the candidates, within a padded distance, and the pairs are decided on
-    ``X``, by the test of the whole-box searches."""
+    ``X``, by the test of the whole-box searches, each candidate first brought up to date from
+    the ``log`` of deferred flights (:mod:`parsim.core.ts.deferred`)."""
     d = X.shape[1]
     y = np.empty(d)
     pairs = np.empty((16, 2), dtype=np.int64)
@@ -62,6 +64,7 @@ def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R
                 if far > padded * padded:
                     continue
                 j = binned_rows[s]
+                catch_up(X, log[0], j, log[1], log[2], log[3])
                 limit = R[q] + R[j] + reach
                 if _distance_sq(X, q, X, j) <= limit * limit:
                     pairs = _with_pair(pairs, count, q, j)
@@ -86,13 +89,14 @@ def _segment_distance_sq(P, s, a, b):
 
 @jit
 def _first_contact_in_frame(QX, QV, QR, queries, duration, X, V, R, reference, shift, binned_rows, binned_X,
-                            binned_R, largest, first, side, k):
+                            binned_R, largest, first, side, k, log):
     """The earliest time within ``duration`` at which a query (a row of ``QX, QV, QR``), flying
     straight, touches a binned row of ``X, V, R``, all of which fly at the velocity of row
     ``reference``; ``inf`` if none does.  Each query's path in the frame is cut into pieces at
     most a cell long, and the cells around each piece are scanned: a row the path touches lies
     within ``R_q + R_j`` of it.  The frame's positions select the candidates, the times come
-    from the rows' positions and velocities (:func:`parsim.core.ts.quiet.time_between`)."""
+    from the rows' positions and velocities (:func:`parsim.core.ts.quiet.time_between`), each
+    candidate first brought up to date from the ``log`` of deferred flights."""
     d = X.shape[1]
     start = np.empty(d)
     end = np.empty(d)
@@ -113,6 +117,7 @@ def _first_contact_in_frame(QX, QV, QR, queries, duration, X, V, R, reference, s
                 for s in range(first[c], first[c + 1]):
                     padded = (QR[q] + binned_R[s]) * (1.0 + ROUNDING_PAD)
                     if _segment_distance_sq(binned_X, s, start, end) <= padded * padded:
+                        catch_up(X, log[0], binned_rows[s], log[1], log[2], log[3])
                         earliest = min(earliest, time_between(QX, QV, QR, q, X, V, R, binned_rows[s]))
     return earliest
 
@@ -139,26 +144,36 @@ class ClusterFrame:
         self._binned_R = R[self._binned_rows]
         self._largest = float(self._binned_R.max(initial=0.0))
 
-    def pairs_near(self, X, R, queries, reach):
+    def pairs_near(self, X, R, queries, reach, log=None):
         """Pairs ``(q, j)`` of rows, ``q`` in ``queries``, ``j`` in the frame, with a gap of at
-        most ``reach`` (``X``: the rows' positions now, ``R``: their radii)."""
+        most ``reach`` (``X``: the rows' positions now, ``R``: their radii; ``log``: the
+        deferred flights of the frame's rows, :meth:`parsim.core.ts.deferred.DeferredFlight.log`)."""
         if self.rows.size == 0:
             return np.empty((0, 2), dtype=np.int64)
-        return _pairs_in_frame(X, R, queries, reach, self._shift(X), self._binned_rows, self._binned_X, self._binned_R,
-                               self._largest, self._first, self.side, self.k)
+        log = no_log(X.shape[1]) if log is None else log
+        return _pairs_in_frame(X, R, queries, reach, self._shift(X, log), self._binned_rows, self._binned_X,
+                               self._binned_R, self._largest, self._first, self.side, self.k, log)
 
-    def first_contact(self, X, V, R, queries, duration, query_rows=None):
+    def first_contact(self, X, V, R, queries, duration, query_rows=None, log=None):
         """The earliest time within ``duration`` at which one of the rows ``queries`` touches a
         row of the frame, every row flying straight (the frame's rows at one velocity); ``inf``
         if none does.  The queries are rows of ``X, V, R`` (the rows' positions, velocities and
-        radii now), or of ``query_rows``, another such triple."""
+        radii now), or of ``query_rows``, another such triple; ``log`` as for :meth:`pairs_near`."""
         if self.rows.size == 0:
             return math.inf
         QX, QV, QR = (X, V, R) if query_rows is None else query_rows
-        return _first_contact_in_frame(QX, QV, QR, queries, duration, X, V, R, self.rows[0], self._shift(X),
+        log = no_log(X.shape[1]) if log is None else log
+        return _first_contact_in_frame(QX, QV, QR, queries, duration, X, V, R, self.rows[0], self._shift(X, log),
                                        self._binned_rows, self._binned_X, self._binned_R, self._largest, self._first,
-                                       self.side, self.k)
+                                       self.side, self.k, log)
 
-    def _shift(self, X):
-        """How far the frame's rows have moved since they were binned."""
+    def _shift(self, X, log):
+        """How far the frame's rows have moved since they were binned (its reference row brought
+        up to date first)."""
+        catch_up(X, log[0], self.rows[0], log[1], log[2], log[3])
         return X[self.rows[0]] - self._origin[0]
+
+
+def no_log(dimension):
+    """The ``log`` of rows that are all up to date (no deferred flight)."""
+    return (np.empty((0, dimension)), np.empty((0, dimension)), np.empty(0, dtype=np.int64), np.zeros(dimension))

@@ -30,7 +30,10 @@ cluster's own being kept binned in its moving frame until the next merge
 keeps no watch: it follows their straight paths through that frame to the first possible
 contact, up to the next wall reflection, and the step after a quiet stretch finds its contacts
 in the frame.  Over several processes each follows the paths of all of them (gathered, a few
-hundred rows) through the frame of its own rows of the largest cluster.
+hundred rows) through the frame of its own rows of the largest cluster.  On one process the largest
+cluster's flights and wall reflections are then logged, not applied to its rows, and a row gets
+them when it is read (:mod:`parsim.core.ts.deferred`): the same run bit for bit, without three
+passes over all spheres per wall reflection.
 
 Formulations.  ``"non_rigid"`` (section 3.1): every sphere of the interacting clusters
 moves and every link attracts (eq. 3.5).  ``"almost_rigid"`` (section 3.3): only the
@@ -63,11 +66,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from parsim.core.celllist import grid_size
-from parsim.core.ts.clusters import (apply_reflections, cluster_momenta, free_flight, involved_spheres, merge_clusters,
+from parsim.core.ts.clusters import (apply_reflections, apply_reflections_to, cluster_momenta, free_flight, involved_spheres, merge_clusters,
                                      overruns, reflections, set_cluster_velocities, translate)
 from parsim.core.ts.contacts import (check_discs_or_spheres, cross_cluster_contacts, cross_cluster_pairs,
                                     unlinked_contacts)
 from parsim.core.ts.daha import DahaParameters, minimise
+from parsim.core.ts.deferred import DeferredFlight, translate_rows
 from parsim.core.ts.domain import SerialDomain
 from parsim.core.ts.frame import ClusterFrame
 from parsim.core.ts.links import LinkSet
@@ -120,6 +124,10 @@ QUIET_HORIZON_BOX_FRACTION = 1.0 / 8.0
 #: With at most this many spheres outside the largest cluster, the look-aheads follow their
 #: straight paths through its frame instead of keeping a watch.
 PATH_QUERIES = 1024
+
+#: Whether the largest cluster's flights and reflections are deferred while the look-aheads
+#: follow paths on one process (:mod:`parsim.core.ts.deferred`; the same run bit for bit).
+DEFER_FLIGHTS = True
 
 #: Spheres of one cluster whose distances to a wall differ by less than this (times L) count as
 #: level when the run looks for the cluster's outermost spheres.
@@ -180,6 +188,18 @@ class _LargestCluster:
         made_for = self._made_for[1]
         return self._made_for[0] is cluster and (made_for is global_id or np.array_equal(made_for, global_id))
 
+    @property
+    def inside(self):
+        """The owned rows of the cluster."""
+        return self._inside
+
+    def has_wall_rows(self):
+        return self._outermost is not None
+
+    def has_frame(self, cutoff):
+        """Whether :meth:`frame` for ``cutoff`` returns the frame it has (bins nothing)."""
+        return self._frame is not None and cutoff <= self._frame.cutoff <= 2.0 * cutoff
+
     def wall_rows(self, X, R, box_length):
         """The owned rows that can reach a wall first: those outside the cluster and its
         outermost ones (:func:`parsim.core.ts.quiet.outermost`; the cluster translates rigidly,
@@ -192,7 +212,7 @@ class _LargestCluster:
         """The owned rows of the cluster in its frame, in cells sized for searches up to
         ``cutoff`` (binned again when the frame's were sized for less, or for more than twice
         as much: any size is right, these are fast)."""
-        if self._frame is None or not cutoff <= self._frame.cutoff <= 2.0 * cutoff:
+        if not self.has_frame(cutoff):
             self._frame = ClusterFrame(X, R, self._inside, cutoff, box_length)
         return self._frame
 
@@ -236,20 +256,23 @@ class _Run:
         self.watch = None  # the pairs that can touch soon (a Watch), while it holds
         self._largest = _LargestCluster(self.cluster, self.n_clusters, self.global_id, self.own_cluster)
         self._closing = None  # the closing speed, once computed
+        self._deferred = None  # the largest cluster's deferred flights (a DeferredFlight), while kept
 
     def advect(self, dt):
         """Step 1: free flight, then the whole-cluster wall reflection; returns the reflections made."""
         flight = dt * self.closing() if self.watch is not None else 0.0  # at the velocities of the flight
         largest = self._largest  # as the look-aheads left it: not made again after every merge
         if largest.holds_most and largest.holds(self.cluster, self.global_id):
-            wall_rows = largest.wall_rows(self.X, self.R, self.L)  # the only rows that can reach a wall first
-            translate(self.X, self.V, dt)
+            wall_rows = self._wall_rows(largest)  # the only rows that can reach a wall first
+            self._translate(dt)
+            self._bring_up_to_date(wall_rows)
             where, extent = overruns(self.X, self.R, self.own_cluster, self.L, wall_rows)
         else:
+            self._settle()
             where, extent = free_flight(self.X, self.V, self.R, self.own_cluster, self.L, dt)
         where, shift, sign = reflections(self.domain.gather(where), self.domain.gather(extent), self.L)
         if shift.size:
-            apply_reflections(self.X, self.V, self.own_cluster, where, shift, sign)
+            self._reflect(where, shift, sign)
             self._closing = None  # turned velocities
         global_id, self.X, self.V = self.domain.redistribute(self.global_id, self.X, self.V)
         if global_id is not self.global_id:  # rows migrated (one process keeps its rows)
@@ -262,7 +285,73 @@ class _Run:
         """``steps`` quiet steps of length ``dt`` in one advection (no contact, no reflection)."""
         if self.watch is not None:  # the closing speed costs O(N) after every reflection
             self._closed_by(steps * dt * self.closing())
-        translate(self.X, self.V, steps * dt)
+        self._translate(steps * dt)
+
+    def _translate(self, duration):
+        """Item (i) when no sphere reaches a wall: every row flies ``duration``; the largest
+        cluster's rows by a deferred flight while one is kept (:meth:`_deferral`)."""
+        deferred = self._deferral()
+        if deferred is None:
+            translate(self.X, self.V, duration)
+        else:
+            translate_rows(self.X, self.V, duration, self._largest.outside)
+            deferred.fly(self.X, self.V, duration)
+
+    def _reflect(self, where, shift, sign):
+        """Item (ii) for the reflections ``where`` (rows of :func:`reflections`): the largest
+        cluster's as deferred shifts while its flights are deferred, the others' in place."""
+        deferred = self._deferred
+        if deferred is None:
+            apply_reflections(self.X, self.V, self.own_cluster, where, shift, sign)
+            return
+        largest = where[:, 0] == self._largest.label
+        for r in np.flatnonzero(largest):
+            deferred.reflect(self.X, self.V, int(where[r, 1]), float(shift[r]), float(sign[r]))
+        others = ~largest
+        apply_reflections_to(self.X, self.V, self.own_cluster, where[others], shift[others], sign[others],
+                             self._largest.outside)
+
+    def _deferral(self):
+        """The log of the largest cluster's flights and reflections (:mod:`parsim.core.ts.deferred`),
+        made if none is kept, while the look-aheads follow paths on one process and the largest
+        cluster is the one it was made for; else None, any log applied first."""
+        largest = self._largest
+        if not (DEFER_FLIGHTS and self.domain.size == 1 and self.watch is None and self._follows_paths(largest)
+                and largest.holds(self.cluster, self.global_id) and largest.has_wall_rows()
+                and largest.has_frame(self._frame_cutoff())):
+            self._settle()
+            return None
+        if self._deferred is None or self._deferred.rows is not largest.inside:
+            self._settle()
+            self._deferred = DeferredFlight(self.X, self.V, largest.inside)
+        return self._deferred
+
+    def _settle(self):
+        """Bring every row up to date and drop the log of deferred flights (before anything
+        reads all rows, or the largest cluster changes)."""
+        if self._deferred is not None:
+            self._deferred.settle(self.X, self.V)
+            self._deferred = None
+
+    def _bring_up_to_date(self, rows):
+        if self._deferred is not None:
+            self._deferred.bring_up_to_date(self.X, self.V, rows)
+
+    def _log(self):
+        """The deferred flights as the frame's kernels take them (None: every row up to date)."""
+        return None if self._deferred is None else self._deferred.log(self.V)
+
+    def _wall_rows(self, largest):
+        """:meth:`_LargestCluster.wall_rows`, every row brought up to date before they are found."""
+        if not largest.has_wall_rows():
+            self._settle()
+        return largest.wall_rows(self.X, self.R, self.L)
+
+    def _frame(self, largest, cutoff):
+        """:meth:`_LargestCluster.frame`, every row brought up to date before it is binned."""
+        if not largest.has_frame(cutoff):
+            self._settle()
+        return largest.frame(self.X, self.R, cutoff, self.L)
 
     def _closed_by(self, gap):
         """Every pair of spheres came at most ``gap`` closer: shrink the watch's slack, and drop
@@ -300,12 +389,14 @@ class _Run:
         (a float bound): from the paths of the few spheres outside the largest cluster
         (:meth:`_steps_before_contact`), or else from a watch, made if none holds."""
         largest = self._largest_cluster()
-        wall_rows = largest.wall_rows(self.X, self.R, self.L)
+        wall_rows = self._wall_rows(largest)
+        self._bring_up_to_date(wall_rows)
         quiet = self.domain.min(steps_before_wall(self.X, self.V, self.R, self.L, dt, wall_rows))
         if 0 < quiet < math.inf and self._follows_paths(largest):
             self.watch = None
             return min(quiet, self._steps_before_contact(largest, (quiet + 1.0) * dt, dt))
         if quiet > 0:
+            self._settle()  # the watch reads every row
             closing = self.closing()
             if self.watch is None or self.watch.lasts(dt, closing) < 2.0:  # no quiet step left: renew
                 self.watch = self._new_watch(dt, closing)
@@ -327,9 +418,10 @@ class _Run:
         """Steps of length ``dt`` before any two spheres of different clusters, flying straight,
         can touch, looked at over ``duration``: the paths of the spheres outside the largest
         cluster (of every process) through the frame of its owned rows, and every pair of them."""
-        frame = largest.frame(self.X, self.R, self._frame_cutoff(), self.L)
+        frame = self._frame(largest, self._frame_cutoff())
         X, V, R, cluster, queries = self._outside_rows(largest)
-        first = min(frame.first_contact(self.X, self.V, self.R, queries, duration, query_rows=(X, V, R)),
+        first = min(frame.first_contact(self.X, self.V, self.R, queries, duration, query_rows=(X, V, R),
+                                        log=self._log()),
                     first_contact_among(X, V, R, cluster, queries))
         first = self.domain.min(first)
         return steps_before(first, dt) if first < math.inf else math.inf
@@ -355,6 +447,7 @@ class _Run:
         """A watch of the pairs within the gap the fastest pair closes in ``horizon_steps`` steps,
         or less (see the constants), searched from the spheres outside the largest cluster
         (every pair of different clusters has an end there)."""
+        self._settle()
         largest = self._largest_cluster()
         horizon = min(self.horizon_steps * closing * dt, QUIET_HORIZON_BOX_FRACTION * self.L,
                       self.domain.max_halo_width - self.contact, self._affordable_horizon(self.n - largest.size))
@@ -378,8 +471,8 @@ class _Run:
         searches up to ``cells_for``): each process reports those with an owned end in the
         largest cluster, and those between two other spheres with an owned end."""
         queries = np.concatenate([largest.outside, n_owned + np.flatnonzero(cluster[n_owned:] != largest.label)])
-        frame = largest.frame(self.X, self.R, cells_for, self.L)
-        with_largest = frame.pairs_near(X, R, queries, horizon)
+        frame = self._frame(largest, cells_for)
+        with_largest = frame.pairs_near(X, R, queries, horizon, log=self._log())
         k, side = grid_size(self.L, self.contact + horizon, self.d, max(queries.size, 1), CONTACT_CELLS_PER_SPHERE)
         among = queries[cross_cluster_pairs(X[queries], R[queries], cluster[queries], np.arange(queries.size),
                                             horizon, side, k)]
@@ -423,17 +516,21 @@ class _Run:
     def interact(self, step, time):
         """Step 2: link, minimise, link what the minimisation made touch, until nothing new.
         Returns whether any link was made."""
+        follows_paths = self._follows_paths(self._largest_cluster())
+        if self.watch is not None or not follows_paths:
+            self._settle()
         _, ids, X, R, cluster = self._with_ghosts(self.contact)
         n_owned = self.X.shape[0]
         if self.watch is not None:
             touching = self.watch.contacts(X, R, cluster, ids)
-        elif self._follows_paths(self._largest_cluster()):
+        elif follows_paths:
             touching = self._pairs_outside(self._largest_cluster(), X, R, cluster, n_owned, 0.0, self._frame_cutoff())
         else:
             touching = cross_cluster_contacts(X, R, cluster, self.grid_side, self.grid_k)
         new = self._shared_pairs(touching, ids, n_owned)
         if new.shape[0] == 0:
             return False
+        self._settle()  # the minimisation reads and moves every sphere of the merging clusters
         made = [new]
         self.links.add(new[:, 0], new[:, 1], step)
         start = self.X.copy()
@@ -607,6 +704,7 @@ class _Run:
 
     def result_rows(self):
         """Positions and velocities of all spheres, by global id."""
+        self._settle()
         ids = self.domain.gather(self.global_id)
         order = np.argsort(ids)
         return self.domain.gather(self.X)[order], self.domain.gather(self.V)[order]
