@@ -11,6 +11,8 @@ Members:
 - ``distribute(X, V, tile_side)`` -> ``(global_id, X, V)`` of the spheres owned here, at the
   start; ``tile_side`` is the least width of the tiles ranks own (the halo width);
 - ``redistribute(global_id, X, V)``: the same after the spheres moved (migration, balance);
+- ``hold_everything(global_id, X, V)``: from then on every process holds every sphere (the rows
+  of all, by global id) and runs alone, ``size`` 1;
 - ``ghosts(X, global_id, width)``: a halo of the spheres of other processes within ``width``
   of this one's sub-box: ``n_ghost``, ``ghost_global_id`` and ``exchange(values)`` (the
   ghosts' rows of per-owned-sphere ``values``); ``max_halo_width`` bounds ``width``;
@@ -49,6 +51,9 @@ class SerialDomain:
         return np.arange(X.shape[0], dtype=np.int64), X, V
 
     def redistribute(self, global_id, X, V):
+        return global_id, X, V
+
+    def hold_everything(self, global_id, X, V):
         return global_id, X, V
 
     def ghosts(self, X, global_id, width):

@@ -23,7 +23,7 @@ from parsim.core.celllist import cells_over, grid_size
 from parsim.core.jit import jit
 from parsim.core.ts.contacts import _distance_sq, _sorted_by_cell, _with_pair
 from parsim.core.ts.deferred import catch_up
-from parsim.core.ts.quiet import time_between
+from parsim.core.ts.quiet import time_to_contact
 
 #: The search looks this much farther, relatively: the spheres' positions are rounded at
 #: every flight, so the frame's shift matches each sphere's own only to within round-off.
@@ -88,15 +88,15 @@ def _segment_distance_sq(P, s, a, b):
 
 
 @jit
-def _first_contact_in_frame(QX, QV, QR, queries, duration, X, V, R, reference, shift, binned_rows, binned_X,
-                            binned_R, largest, first, side, k, log):
-    """The earliest time within ``duration`` at which a query (a row of ``QX, QV, QR``), flying
-    straight, touches a binned row of ``X, V, R``, all of which fly at the velocity of row
-    ``reference``; ``inf`` if none does.  Each query's path in the frame is cut into pieces at
-    most a cell long, and the cells around each piece are scanned: a row the path touches lies
-    within ``R_q + R_j`` of it.  The frame's positions select the candidates, the times come
-    from the rows' positions and velocities (:func:`parsim.core.ts.quiet.time_between`), each
-    candidate first brought up to date from the ``log`` of deferred flights."""
+def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned_rows, binned_X, binned_R, largest,
+                            first, side, k, log):
+    """The earliest time within ``duration`` at which a query, flying straight at ``V_q``,
+    touches a binned row, all of which fly at the velocity of row ``reference``; ``inf`` if none
+    does.  Each query's path in the frame is cut into pieces at most a cell long, and the cells
+    around each piece are scanned: a row the path touches lies within ``R_q + R_j`` of it.  The
+    frame's positions select the candidates, the times come from ``X`` and ``V``
+    (:func:`parsim.core.ts.quiet.time_to_contact`), each candidate first brought up to date
+    from the ``log`` of deferred flights."""
     d = X.shape[1]
     start = np.empty(d)
     end = np.empty(d)
@@ -104,21 +104,21 @@ def _first_contact_in_frame(QX, QV, QR, queries, duration, X, V, R, reference, s
     for q in queries:
         length = 0.0
         for a in range(d):
-            length += (QV[q, a] - V[reference, a]) ** 2
+            length += (V[q, a] - V[reference, a]) ** 2
         length = math.sqrt(length) * duration
         pieces = max(1, int(math.ceil(length / side)))
-        reach = (QR[q] + largest) * (1.0 + ROUNDING_PAD)
+        reach = (R[q] + largest) * (1.0 + ROUNDING_PAD)
         for piece in range(pieces):
             for a in range(d):
-                u = QV[q, a] - V[reference, a]
-                start[a] = QX[q, a] - shift[a] + u * duration * piece / pieces
-                end[a] = QX[q, a] - shift[a] + u * duration * (piece + 1) / pieces
+                u = V[q, a] - V[reference, a]
+                start[a] = X[q, a] - shift[a] + u * duration * piece / pieces
+                end[a] = X[q, a] - shift[a] + u * duration * (piece + 1) / pieces
             for c in cells_over(np.minimum(start, end) - reach, np.maximum(start, end) + reach, side, k):
                 for s in range(first[c], first[c + 1]):
-                    padded = (QR[q] + binned_R[s]) * (1.0 + ROUNDING_PAD)
+                    padded = (R[q] + binned_R[s]) * (1.0 + ROUNDING_PAD)
                     if _segment_distance_sq(binned_X, s, start, end) <= padded * padded:
                         catch_up(X, log[0], binned_rows[s], log[1], log[2], log[3])
-                        earliest = min(earliest, time_between(QX, QV, QR, q, X, V, R, binned_rows[s]))
+                        earliest = min(earliest, time_to_contact(X, V, R, q, binned_rows[s]))
     return earliest
 
 
@@ -154,18 +154,16 @@ class ClusterFrame:
         return _pairs_in_frame(X, R, queries, reach, self._shift(X, log), self._binned_rows, self._binned_X,
                                self._binned_R, self._largest, self._first, self.side, self.k, log)
 
-    def first_contact(self, X, V, R, queries, duration, query_rows=None, log=None):
+    def first_contact(self, X, V, R, queries, duration, log=None):
         """The earliest time within ``duration`` at which one of the rows ``queries`` touches a
         row of the frame, every row flying straight (the frame's rows at one velocity); ``inf``
-        if none does.  The queries are rows of ``X, V, R`` (the rows' positions, velocities and
-        radii now), or of ``query_rows``, another such triple; ``log`` as for :meth:`pairs_near`."""
+        if none does; ``log`` as for :meth:`pairs_near`."""
         if self.rows.size == 0:
             return math.inf
-        QX, QV, QR = (X, V, R) if query_rows is None else query_rows
         log = no_log(X.shape[1]) if log is None else log
-        return _first_contact_in_frame(QX, QV, QR, queries, duration, X, V, R, self.rows[0], self._shift(X, log),
-                                       self._binned_rows, self._binned_X, self._binned_R, self._largest, self._first,
-                                       self.side, self.k, log)
+        return _first_contact_in_frame(X, V, R, queries, duration, self.rows[0], self._shift(X, log), self._binned_rows,
+                                       self._binned_X, self._binned_R, self._largest, self._first, self.side, self.k,
+                                       log)
 
     def _shift(self, X, log):
         """How far the frame's rows have moved since they were binned (its reference row brought

@@ -62,21 +62,14 @@ def time_to_contact(X, V, R, i, j):
     ``|dx + t dv| = R_i + R_j`` (``dx = X_i - X_j``, ``dv = V_i - V_j``), 0 if they touch now,
     ``inf`` if never.  Conservative: the distance is shrunk by ``MARGIN |dx|^2``, which keeps the
     rounding of ``b^2 - a c`` (about 1e-16 ``|dx|^2 |dv|^2``) on the safe side."""
-    return time_between(X, V, R, i, X, V, R, j)
-
-
-@jit
-def time_between(X, V, R, i, Y, W, S, j):
-    """:func:`time_to_contact` of sphere ``i`` of ``(X, V, R)`` and sphere ``j`` of another set
-    of rows ``(Y, W, S)`` (positions, velocities, radii)."""
     a = b = distance_sq = 0.0
     for k in range(X.shape[1]):
-        dx = X[i, k] - Y[j, k]
-        dv = V[i, k] - W[j, k]
+        dx = X[i, k] - X[j, k]
+        dv = V[i, k] - V[j, k]
         a += dv * dv
         b += dx * dv
         distance_sq += dx * dx
-    contact = R[i] + S[j]
+    contact = R[i] + R[j]
     c = distance_sq * (1.0 - MARGIN) - contact * contact
     if c <= 0.0:
         return 0.0

@@ -29,9 +29,8 @@ cluster's own being kept binned in its moving frame until the next merge
 (:mod:`parsim.core.ts.frame`).  With few spheres outside it (``PATH_QUERIES``), a look-ahead
 keeps no watch: it follows their straight paths through that frame to the first possible
 contact, up to the next wall reflection, and the step after a quiet stretch finds its contacts
-in the frame.  Over several processes each follows the paths of all of them (gathered, a few
-hundred rows) through the frame of its own rows of the largest cluster.  On one process the largest
-cluster's flights and wall reflections are then logged, not applied to its rows, and a row gets
+in the frame.  A run over several processes then goes on as one on each, all alike (its rows
+gathered: :meth:`_Run._hold_everything`).  The largest cluster's flights and wall reflections are then logged, not applied to its rows, and a row gets
 them when it is read (:mod:`parsim.core.ts.deferred`): the same run bit for bit, without three
 passes over all spheres per wall reflection.
 
@@ -378,9 +377,9 @@ class _Run:
     def _with_ghosts(self, width):
         """Owned and ghost rows, to be read, not written: ``(halo, global ids, positions, radii,
         cluster labels)``."""
-        halo = self.domain.ghosts(self.X, self.global_id, width)
         if self.domain.size == 1:  # no ghosts: spare the copies and gathers (0.3 ms at N = 102 400)
-            return halo, self.global_id, self.X, self.R, self.own_cluster
+            return None, self.global_id, self.X, self.R, self.own_cluster
+        halo = self.domain.ghosts(self.X, self.global_id, width)
         ids = np.concatenate([self.global_id, halo.ghost_global_id])
         return halo, ids, np.concatenate([self.X, halo.exchange(self.X)]), self.R_all[ids], self.cluster[ids]
 
@@ -389,6 +388,8 @@ class _Run:
         (a float bound): from the paths of the few spheres outside the largest cluster
         (:meth:`_steps_before_contact`), or else from a watch, made if none holds."""
         largest = self._largest_cluster()
+        if self.domain.size > 1 and self._follows_paths(largest):
+            largest = self._hold_everything()
         wall_rows = self._wall_rows(largest)
         self._bring_up_to_date(wall_rows)
         quiet = self.domain.min(steps_before_wall(self.X, self.V, self.R, self.L, dt, wall_rows))
@@ -408,35 +409,32 @@ class _Run:
         self.horizon_steps = min(2 * self.horizon_steps, QUIET_HORIZON_STEPS[1]) if quiet > 0 else QUIET_HORIZON_STEPS[0]
         return quiet
 
+    def _hold_everything(self):
+        """Every process takes every sphere and runs the rest alone, all alike; returns the new
+        :class:`_LargestCluster`.  Called once the look-aheads follow paths: the steps of such a
+        late stage move a few small clusters and one rigid cluster, which sharing out does not
+        speed up (each step its rows cross rank borders, to be migrated and binned again), and
+        on one process the rigid cluster's flights are deferred (:meth:`_deferral`)."""
+        self.global_id, self.X, self.V = self.domain.hold_everything(self.global_id, self.X, self.V)
+        self.R, self.own_cluster = self.R_all[self.global_id], self.cluster[self.global_id]
+        self.watch = None
+        self._closing = None
+        self._largest = _LargestCluster(self.cluster, self.n_clusters, self.global_id, self.own_cluster)
+        return self._largest
+
     def _follows_paths(self, largest):
         """Whether the look-aheads follow the paths of the few spheres outside the largest
-        cluster through its frame, with no watch (at most ``PATH_QUERIES`` of them, on all
-        processes)."""
+        cluster through its frame, with no watch (at most ``PATH_QUERIES`` of them)."""
         return largest.holds_most and self.n - largest.size <= PATH_QUERIES
 
     def _steps_before_contact(self, largest, duration, dt):
         """Steps of length ``dt`` before any two spheres of different clusters, flying straight,
         can touch, looked at over ``duration``: the paths of the spheres outside the largest
-        cluster (of every process) through the frame of its owned rows, and every pair of them."""
+        cluster through its frame, and every pair of them (one process: :meth:`_hold_everything`)."""
         frame = self._frame(largest, self._frame_cutoff())
-        X, V, R, cluster, queries = self._outside_rows(largest)
-        first = min(frame.first_contact(self.X, self.V, self.R, queries, duration, query_rows=(X, V, R),
-                                        log=self._log()),
-                    first_contact_among(X, V, R, cluster, queries))
-        first = self.domain.min(first)
+        first = min(frame.first_contact(self.X, self.V, self.R, largest.outside, duration, log=self._log()),
+                    first_contact_among(self.X, self.V, self.R, self.own_cluster, largest.outside))
         return steps_before(first, dt) if first < math.inf else math.inf
-
-    def _outside_rows(self, largest):
-        """The spheres outside the largest cluster, of every process: ``(X, V, R, cluster labels,
-        their rows)``; on one process its own arrays (no copies), else the rows gathered (one
-        gather of positions, velocities and global ids)."""
-        if self.domain.size == 1:
-            return self.X, self.V, self.R, self.own_cluster, largest.outside
-        outside = largest.outside
-        rows = self.domain.gather(np.column_stack([self.X[outside], self.V[outside], self.global_id[outside]]))
-        ids = rows[:, -1].astype(np.int64)  # exact: global ids are far below 2^53
-        return (np.ascontiguousarray(rows[:, :self.d]), np.ascontiguousarray(rows[:, self.d:2 * self.d]),
-                self.R_all[ids], self.cluster[ids], np.arange(ids.size))
 
     def _frame_cutoff(self):
         """The search distance the largest cluster's frame is binned for: that of the longest
