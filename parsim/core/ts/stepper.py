@@ -30,9 +30,10 @@ cluster's own being kept binned in its moving frame until the next merge
 keeps no watch: it follows their straight paths through that frame to the first possible
 contact, up to the next wall reflection, and the step after a quiet stretch finds its contacts
 in the frame.  A run over several processes then goes on as one on each, all alike (its rows
-gathered: :meth:`_Run._hold_everything`).  The largest cluster's flights and wall reflections are then logged, not applied to its rows, and a row gets
-them when it is read (:mod:`parsim.core.ts.deferred`): the same run bit for bit, without three
-passes over all spheres per wall reflection.
+gathered: :meth:`_Run._hold_everything`).  The largest cluster's flights and wall reflections
+are then logged, not applied to its rows, and a row gets them when it is read
+(:mod:`parsim.core.ts.deferred`): the same run bit for bit, without three passes over all
+spheres per wall reflection.
 
 Formulations.  ``"non_rigid"`` (section 3.1): every sphere of the interacting clusters
 moves and every link attracts (eq. 3.5).  ``"almost_rigid"`` (section 3.3): only the
@@ -65,8 +66,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from parsim.core.celllist import grid_size
-from parsim.core.ts.clusters import (apply_reflections, apply_reflections_to, cluster_momenta, free_flight, involved_spheres, merge_clusters,
-                                     overruns, reflections, set_cluster_velocities, translate)
+from parsim.core.ts.clusters import (apply_reflections, apply_reflections_to, cluster_momenta, free_flight,
+                                     involved_spheres, merge_clusters, overruns, reflections, set_cluster_velocities,
+                                     translate)
 from parsim.core.ts.contacts import (check_discs_or_spheres, cross_cluster_contacts, cross_cluster_pairs,
                                     unlinked_contacts)
 from parsim.core.ts.daha import DahaParameters, minimise
