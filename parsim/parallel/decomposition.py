@@ -61,6 +61,8 @@ class Decomposition:
         self.tiles_per_side = tiles_per_side
         self.tile_side = self.box_length / tiles_per_side
         self._rank_at = self._rank_table()
+        self._dims = np.array(self.dims, dtype=np.int64)  # the rank grid and its table as block_owners takes them
+        self._rank_of_block = self._rank_at.ravel()
         self.neighbours, self.neighbour_offsets = self._find_neighbours()
         self.set_tile_splits([even_boundaries(tiles_per_side, parts) for parts in self.dims])
 
@@ -112,8 +114,8 @@ class Decomposition:
         positions = np.asarray(positions, dtype=np.float64)
         if positions.ndim != 2 or positions.shape[1] != self.dimension:
             raise ValueError(f"positions: need shape (n, {self.dimension}), got {positions.shape}")
-        return block_owners(positions, self.tile_side, self.tiles_per_side, self._boundaries,
-                            np.array(self.dims, dtype=np.int64), self._rank_at.ravel())
+        return block_owners(positions, self.tile_side, self.tiles_per_side, self._boundaries, self._dims,
+                            self._rank_of_block)
 
     # load balance ---------------------------------------------------------------------
 

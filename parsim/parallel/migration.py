@@ -56,10 +56,10 @@ def migrate(decomposition: Decomposition, global_id, arrays: dict, owner=None) -
     owner = decomposition.owner_of(arrays["position"]) if owner is None else owner
     stays = owner == decomposition.rank
     leaving = np.flatnonzero(~stays)
-    by_owner = leaving[np.argsort(owner[leaving], kind="stable")]
-    send_counts = np.bincount(owner[leaving], minlength=decomposition.size)
     if decomposition.comm.allreduce(leaving.size, op=MPI.SUM) == 0:  # every rank alike: no exchange at all
         return (global_id, arrays) if _ascending(global_id) else _sorted_by_id(global_id, arrays)
+    by_owner = leaving[np.argsort(owner[leaving], kind="stable")]
+    send_counts = np.bincount(owner[leaving], minlength=decomposition.size)
     columns = _column_layout(arrays)
     floats, integers = _pack(global_id, arrays, columns, by_owner)
     received_floats, receive_counts = decomposition.alltoallv_rows(floats, send_counts)

@@ -151,13 +151,11 @@ class DecomposedDomain:
         if self.size == 1:  # the rows stay sorted by global id: nothing to sort or send
             return global_id, X, V
         decomposition = self.decomposition
-        if self.size > 1 and decomposition.imbalance(X.shape[0]) > REBALANCE_ABOVE:
+        if decomposition.imbalance(X.shape[0]) > REBALANCE_ABOVE:
             decomposition.set_tile_splits(decomposition.balanced_splits(decomposition.tile_counts(X)))
         started = time.perf_counter()
-        owner, leaving = None, 0
-        if self.size > 1:
-            owner = decomposition.owner_of(X)
-            leaving = int(np.count_nonzero(owner != decomposition.rank))
+        owner = decomposition.owner_of(X)
+        leaving = int(np.count_nonzero(owner != decomposition.rank))
         global_id, arrays = migrate(decomposition, global_id, {"position": X, "velocity": V}, owner)
         self.traffic.add("migration", leaving * 8 * (1 + 2 * self.dimension), started)
         return global_id, arrays["position"], arrays["velocity"]
