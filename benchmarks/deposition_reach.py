@@ -3,7 +3,7 @@ of a decomposed deposition would have to bound in advance.
 
 A decomposed deposition may settle a particle before an earlier particle of another rank only if
 that particle cannot change its path.  A *conservative* scheme decides it before settling, from a
-bound on how far a descent reaches; the *speculative* one (``parsim.parallel.deposition``)
+bound on how far a descent reaches; the *speculative* one (``parsim.deposition.spread``)
 settles first and checks the rectangle the descent actually read (``record_reads``).  This prints
 the distribution of that reach, the largest distance from the drop point to an edge of the read
 rectangle, in sphere diameters, for monodisperse spheres of diameter 1 (FLOOR_ROLL):

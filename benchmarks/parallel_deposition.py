@@ -53,7 +53,7 @@ if __package__ in (None, ""):  # run as a script from a source tree
 from benchmarks.mpi_timing import latency_and_bandwidth  # noqa: E402
 from parsim.core import sdbd  # noqa: E402
 from parsim.core.shapes import DrawnRotations, sphere  # noqa: E402
-from parsim.parallel.deposition import deposit_streamed  # noqa: E402
+from parsim.deposition.spread import deposit_streamed  # noqa: E402
 
 CHUNK = 1 << 20  # particles drawn at a time
 

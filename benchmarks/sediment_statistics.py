@@ -1,6 +1,6 @@
 """Cost of a deposition sediment's statistics against that of its deposition, one core.
 
-Requirement: the statistics of a sediment (everything ``deposition_statistics.measure`` computes:
+Requirement: the statistics of a sediment (everything ``parsim.deposition.statistics.measure`` computes:
 packing fraction of the bulk slab and of the profile's slabs, coordination, contact numbers and
 fabric, g(r), orientation) cost at most a fifth of its deposition; for spheres also at most a fifth
 of the deposition at the speed aimed at, 100 000 spheres per second (2 microseconds per sphere).
@@ -12,7 +12,7 @@ solver's default parameters (default packing_samples, profile_bins, rdf_range, r
 box, floor stops particles. The box side is chosen so that the filling height is about the box
 side or less (from a guessed packing fraction per shape; the table prints h / box). The task runs
 through the solver's own ``solve``; its deposition (``sdbd.deposit``) is timed by wrapping it, and
-the statistics (``deposition_statistics.measure``) are measured --repeats times on the same
+the statistics (``parsim.deposition.statistics.measure``) are measured --repeats times on the same
 sediment, the fastest run counting. Times are CPU seconds of this process (time.process_time: the
 kernels run on one thread, and other processes on the machine do not count); the deposition's
 wall seconds are printed too.
@@ -38,8 +38,8 @@ import tracemalloc
 import numpy as np
 
 from parsim.solvers import SOLVERS
-from parsim.solvers import deposition, deposition_materials
-from parsim.solvers import deposition_statistics as statistics
+from parsim.deposition import materials as deposition_materials, solver as deposition
+from parsim.deposition import statistics as statistics
 
 SOLVER = SOLVERS["deposition"]
 SIZES = (10_000, 100_000, 1_000_000)

@@ -1,6 +1,6 @@
 """Randomised search for deposition jobs whose sediment spread over K ranks is not the serial one.
 
-The claim under test: a deposition split over K ranks (:func:`parsim.parallel.deposition.deposit_streamed`)
+The claim under test: a deposition split over K ranks (:func:`parsim.deposition.spread.deposit_streamed`)
 gives the serial sediment (:func:`parsim.core.sdbd.deposit`) bit for bit, for every job a user can
 write.  The search draws small random deposition jobs (TOML text that ``parsim run`` accepts) over
 every key that changes a descent: each shape kind (sphere, rod, four_rods, tripod, spiky, cube,
@@ -13,7 +13,7 @@ The container is sized from the particles so that most jobs split into K blocks 
 than the default halo); each job takes about a second once the kernels are compiled.
 
 Each job's inputs are built as ``parsim run`` builds them (the task's random stream from the
-job's seed, :func:`parsim.solvers.deposition.deposition_inputs`); the serial sediment is deposited
+job's seed, :func:`parsim.deposition.solver.deposition_inputs`); the serial sediment is deposited
 once, then the job runs under ``mpiexec -n K`` with ``deposit_streamed(..., check=True)`` and the
 gathered sediment is compared with the serial one field by field, bitwise (positions, radii,
 particle, center_of_mass, rotation, contacts, state, event_counts, steps, stopped_at).  The serial
@@ -69,8 +69,8 @@ from parsim.core import sdbd  # noqa: E402
 from parsim.errors import JobError  # noqa: E402
 from parsim.job import parse_job  # noqa: E402
 from parsim.solvers import SOLVERS  # noqa: E402
-from parsim.solvers.deposition import deposition_inputs  # noqa: E402
-from parsim.solvers.deposition_materials import species_of  # noqa: E402
+from parsim.deposition.solver import deposition_inputs  # noqa: E402
+from parsim.deposition.materials import species_of  # noqa: E402
 from tests.mpi import kill_session, mpiexec  # noqa: E402
 from tests.sediment_checks import close_pairs  # noqa: E402
 
@@ -372,7 +372,7 @@ def serial_sediment(text: str, particles: int | None = None):
 
 def spread_sediment(comm, text: str, check: bool = True, particles: int | None = None, jitter: float = 0.0):
     """The gathered spread sediment on rank 0 (None on the others), the inputs and the blocks that held particles."""
-    from parsim.parallel.deposition import deposit_streamed
+    from parsim.deposition.spread import deposit_streamed
 
     inputs = task_inputs(text, spread=True, particles=particles)
     share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options,

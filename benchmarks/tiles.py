@@ -1,4 +1,4 @@
-"""Benchmark: one time-stepping aggregation decomposed over MPI ranks (parsim.parallel.tiled).
+"""Benchmark: one time-stepping aggregation decomposed over MPI ranks (parsim.aggregation.tiled).
 
 The TS task of benchmarks/aggregation_ts.py (d = 2, R = 0.2, lattice, |V| = 1, V_f = 0.3,
 dt(0) = 0.005 L / max|V|, seed 1) runs for its first ``--steps`` time steps on each number of
@@ -51,7 +51,7 @@ def worker(out, n, volume_fraction, steps):
     from benchmarks.aggregation_ts import TIME_STEP_FACTOR, setup
     from benchmarks.mpi_timing import latency_and_bandwidth
     from parsim.core import kernel_mpi
-    from parsim.parallel.tiled import DecomposedDomain
+    from parsim.aggregation.tiled import DecomposedDomain
 
     comm = MPI.COMM_WORLD
     minimiser_seconds = [0.0]

@@ -8,13 +8,9 @@ its version) loads neither numpy nor MPI.
 """
 
 import importlib
-from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING
 
-try:
-    __version__ = version("parsim")
-except PackageNotFoundError:  # running from a source tree that was not installed
-    __version__ = "0.0.0+unknown"
+from parsim.version import __version__
 
 _API = {"Job": "parsim.job", "load_job": "parsim.api", "run": "parsim.api", "deposit": "parsim.api",
         "aggregate": "parsim.api", "TaskOutcome": "parsim.api", "decoded": "parsim.output.dataset"}

@@ -34,9 +34,9 @@ import signal
 import sys
 from pathlib import Path
 
-import parsim
 from parsim import options
 from parsim.errors import EXIT_RUN_FAILED, EXIT_UNFINISHED, EXIT_USER_ERROR, JobError, ParsimError, exit_status
+from parsim.version import __version__
 
 #: Exit status after Ctrl-C, as the shell gives a process that SIGINT ended.
 EXIT_INTERRUPTED = 128 + signal.SIGINT
@@ -76,7 +76,7 @@ def _parser() -> argparse.ArgumentParser:
     from parsim.output.export import add_export_command
 
     parser = _Parser(prog="parsim", description="Particle piles and clusters, run as MPI ensembles.")
-    parser.add_argument("--version", action="version", version=f"parsim {parsim.__version__}")
+    parser.add_argument("--version", action="version", version=f"parsim {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     run = commands.add_parser("run", help="run or resume a job (use mpiexec -n K for K ranks)")

@@ -9,7 +9,7 @@ import xarray as xr
 from parsim.errors import JobError
 from parsim.job import parse_job
 from parsim.solvers import SOLVERS
-from parsim.solvers.aggregation import box_length, check, warm_up_parameters
+from parsim.aggregation.solver import box_length, check, warm_up_parameters
 from tests.datasets import run_serial
 
 JOB = """

@@ -1,4 +1,4 @@
-"""One sediment spread over MPI ranks (parsim.parallel.deposition) against the serial deposition.
+"""One sediment spread over MPI ranks (parsim.deposition.spread) against the serial deposition.
 
 ``tests/scripts/decomposed_deposition_probe.py`` deposits seven small sediments (every shape kind,
 periodic and walled boxes, a cylinder, a heap, both floors, glued walls, a species mixture whose
@@ -49,7 +49,7 @@ def test_a_failure_on_one_rank_ends_every_rank_with_one_line(tmp_path):
         "import numpy as np\n"
         "from mpi4py import MPI\n"
         "from parsim.core import sdbd\n"
-        "from parsim.parallel.deposition import deposit_decomposed\n"
+        "from parsim.deposition.spread import deposit_decomposed\n"
         "comm = MPI.COMM_WORLD\n"
         "n = 50\n"
         "rng = np.random.default_rng(1)\n"

@@ -1,4 +1,4 @@
-"""The statistics of a sediment spread over MPI ranks (parsim.parallel.deposition_statistics) against the
+"""The statistics of a sediment spread over MPI ranks (parsim.deposition.spread_statistics) against the
 serial statistics of the gathered sediment.
 
 ``tests/scripts/decomposed_statistics_probe.py`` runs the deposition solver on 2 and 4 ranks for six

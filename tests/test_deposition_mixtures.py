@@ -199,7 +199,7 @@ def test_no_contact_across_opposite_walls():
     """Two spheres touching opposite walls of a walled box do not touch each other; in a periodic
     box of the same side they do, through the side."""
     from parsim.core.structure import contact_network
-    from parsim.solvers.deposition_statistics import contact_part
+    from parsim.deposition.statistics import contact_part
 
     length = 6.0
     positions = np.array([[0.5, 3.0, 0.5], [length - 0.5, 3.0, 0.5]])
@@ -244,8 +244,8 @@ species = ""
 def test_particles_drawn_in_chunks_are_those_drawn_at_once(lateral):
     """A rank of a task spread over ranks draws the particles a chunk at a time, keeping its own: every
     chunk, across layers and species, continues the streams exactly where the one draw would."""
-    from parsim.solvers.deposition import _container, _particle_chunks
-    from parsim.solvers.deposition_materials import species_of
+    from parsim.deposition.solver import _container, _particle_chunks
+    from parsim.deposition.materials import species_of
 
     params = parse_job(CHUNKED_JOB.format(lateral=lateral), SOLVERS).point_parameters(0)
     species = species_of(params)

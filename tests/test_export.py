@@ -33,8 +33,8 @@ from parsim.agglomerate_file import read_agglomerate  # noqa: E402
 from parsim.errors import JobError  # noqa: E402
 from parsim.core.sdbd.rotation import quat_to_matrix  # noqa: E402
 from parsim.output.export import FORMATS, add_export_command, export_output, run_export  # noqa: E402
-from parsim.solvers.deposition import PARAMETERS as DEPOSITION_PARAMETERS  # noqa: E402
-from parsim.solvers.deposition_materials import particle_shape  # noqa: E402
+from parsim.deposition.solver import PARAMETERS as DEPOSITION_PARAMETERS  # noqa: E402
+from parsim.deposition.materials import particle_shape  # noqa: E402
 from tests.datasets import run_jobs  # noqa: E402
 
 REPOSITORY = Path(__file__).resolve().parent.parent

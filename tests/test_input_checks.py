@@ -13,8 +13,8 @@ from parsim.errors import JobError
 from parsim.job import MAX_NAME_BYTES, parse_job
 from parsim.runner import task_attributes
 from parsim.solvers import SOLVERS
-from parsim.solvers.deposition import PARAMETERS, container_sides
-from parsim.solvers.deposition_materials import species_of
+from parsim.deposition.solver import PARAMETERS, container_sides
+from parsim.deposition.materials import species_of
 
 DEPOSITION = 'name = "d"\nkind = "deposition"\nseed = 1\nrealizations = 1\n[parameters]\nn_particles = 4\n'
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from parsim.core.shapes.mesh import mesh_particle, mesh_properties
+from parsim.deposition.mesh_file import mesh_properties, particle_from_mesh_file
 from parsim.core.shapes.union import centre_of_mass_of_union
 
 # Accuracy of centre_of_mass_of_union at its default resolution (documented: below 2e-4
@@ -60,7 +60,7 @@ def files(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def ellipsoid_series(files):
-    return {n: mesh_particle(files["ellipsoid.stl"], n_spheres=n) for n in (30, 100, 300)}
+    return {n: particle_from_mesh_file(files["ellipsoid.stl"], n_spheres=n) for n in (30, 100, 300)}
 
 
 def in_mesh_frame(offsets, fit):
@@ -142,7 +142,7 @@ def test_ellipsoid_balls_are_inside_the_mesh(files, ellipsoid_series):
 
 
 def test_box_balls_inside_and_surface_distance_brute_force(files):
-    offsets, radii, fit = mesh_particle(files["box.stl"], n_spheres=100)
+    offsets, radii, fit = particle_from_mesh_file(files["box.stl"], n_spheres=100)
     centres = in_mesh_frame(offsets, fit)
     assert np.all(np.abs(centres) + radii[:, None] <= BOX_HALF * (1.0 + INSIDE_RTOL))
     assert -0.2 < fit.volume_error < 0.0  # measured -0.14
@@ -185,7 +185,7 @@ def test_sphere_mesh_gives_one_ball_of_the_inscribed_radius(files):
     inscribed = np.min(np.einsum("fk,fk->f", mesh.face_normals, mesh.triangles[:, 0]))
     assert 1.49 < inscribed < 1.5
     for kwargs in ({"tolerance": 0.03}, {"n_spheres": 1}):
-        offsets, radii, fit = mesh_particle(files["sphere.stl"], **kwargs)
+        offsets, radii, fit = particle_from_mesh_file(files["sphere.stl"], **kwargs)
         assert len(radii) == 1 and fit.n_spheres == 1
         np.testing.assert_allclose(offsets, 0.0, atol=1e-12)
         # the candidates touch the surface at the samples, not exactly where the largest
@@ -197,7 +197,7 @@ def test_sphere_mesh_gives_one_ball_of_the_inscribed_radius(files):
 
 @pytest.mark.parametrize("name, tolerance", [("ellipsoid.stl", 0.05), ("box.stl", 0.1)])
 def test_tolerance_mode_meets_its_tolerance(files, name, tolerance):
-    offsets, radii, fit = mesh_particle(files[name], tolerance=tolerance)
+    offsets, radii, fit = particle_from_mesh_file(files[name], tolerance=tolerance)
     assert fit.relative_surface_distance <= tolerance
     assert fit.volume_error < 0.0
     # independently: every mesh vertex is within the tolerance of the union
@@ -209,7 +209,7 @@ def test_tolerance_mode_meets_its_tolerance(files, name, tolerance):
 
 
 def test_torus_balls_are_inside_the_non_convex_mesh(files):
-    offsets, radii, fit = mesh_particle(files["torus.obj"], n_spheres=60)
+    offsets, radii, fit = particle_from_mesh_file(files["torus.obj"], n_spheres=60)
     assert len(radii) == 60
     assert -0.1 < fit.volume_error < 0.0  # measured -0.05
     mesh = trimesh.load(files["torus.obj"], force="mesh")
@@ -230,16 +230,16 @@ def test_torus_balls_are_inside_the_non_convex_mesh(files):
 
 
 def test_stl_and_obj_of_the_same_solid_give_the_same_template(files):
-    from_stl = mesh_particle(files["ellipsoid.stl"], n_spheres=40)
-    from_obj = mesh_particle(files["ellipsoid.obj"], n_spheres=40)
+    from_stl = particle_from_mesh_file(files["ellipsoid.stl"], n_spheres=40)
+    from_obj = particle_from_mesh_file(files["ellipsoid.obj"], n_spheres=40)
     np.testing.assert_array_equal(from_stl[0], from_obj[0])
     np.testing.assert_array_equal(from_stl[1], from_obj[1])
     assert from_stl[2] == from_obj[2]
 
 
 def test_an_inside_out_mesh_is_turned(files):
-    normal = mesh_particle(files["box.stl"], n_spheres=20)
-    turned = mesh_particle(files["inside_out_box.stl"], n_spheres=20)
+    normal = particle_from_mesh_file(files["box.stl"], n_spheres=20)
+    turned = particle_from_mesh_file(files["inside_out_box.stl"], n_spheres=20)
     assert mesh_properties(files["inside_out_box.stl"]).volume == pytest.approx(1.0)
     np.testing.assert_allclose(turned[1], normal[1], rtol=1e-9)
     assert turned[2].volume_error == pytest.approx(normal[2].volume_error, rel=1e-6)
@@ -270,7 +270,7 @@ def defective_meshes():
 def test_defective_meshes_raise_naming_the_file(tmp_path, name):
     mesh, reason = defective_meshes()[name]
     path = write(mesh, tmp_path, name)
-    for build in (lambda: mesh_particle(path, n_spheres=10), lambda: mesh_properties(path)):
+    for build in (lambda: particle_from_mesh_file(path, n_spheres=10), lambda: mesh_properties(path)):
         with pytest.raises(ValueError, match=reason) as info:
             build()
         assert path in str(info.value)
@@ -278,22 +278,22 @@ def test_defective_meshes_raise_naming_the_file(tmp_path, name):
 
 def test_arguments(files):
     with pytest.raises(ValueError, match="exactly one"):
-        mesh_particle(files["box.stl"])
+        particle_from_mesh_file(files["box.stl"])
     with pytest.raises(ValueError, match="exactly one"):
-        mesh_particle(files["box.stl"], n_spheres=10, tolerance=0.1)
+        particle_from_mesh_file(files["box.stl"], n_spheres=10, tolerance=0.1)
     with pytest.raises(ValueError, match="n_spheres"):
-        mesh_particle(files["box.stl"], n_spheres=0)
+        particle_from_mesh_file(files["box.stl"], n_spheres=0)
     with pytest.raises(ValueError, match="tolerance"):
-        mesh_particle(files["box.stl"], tolerance=-1.0)
+        particle_from_mesh_file(files["box.stl"], tolerance=-1.0)
     with pytest.raises(FileNotFoundError):
-        mesh_particle(files["box.stl"] + ".missing", n_spheres=10)
+        particle_from_mesh_file(files["box.stl"] + ".missing", n_spheres=10)
 
 
 def test_a_mesh_particle_is_scaled_by_the_volume_of_the_mesh_not_of_its_balls(files):
     """The mesh is scaled to the volume of a sphere of radius sphere_radius; its balls, inside it,
     hold (1 + volume_error) of that volume."""
-    from parsim.solvers.deposition import PARAMETERS
-    from parsim.solvers.deposition_materials import mesh_approximation, mesh_volume, particle_shape
+    from parsim.deposition.solver import PARAMETERS
+    from parsim.deposition.materials import mesh_approximation, mesh_volume, particle_shape
 
     params = {p.name: p.default for p in PARAMETERS}
     params.update(shape="mesh", mesh_file=files["box.stl"], mesh_spheres=20, sphere_radius=0.7)

@@ -18,7 +18,7 @@ import pytest
 import xarray as xr
 
 import parsim
-import parsim.solvers.aggregation as aggregation_solver
+import parsim.aggregation.solver as aggregation_solver
 from parsim.errors import JobError
 from parsim.job import parse_job
 from parsim.output.dataset import MEASURED_ATTRIBUTE, VOLATILE_ATTRIBUTES

@@ -15,7 +15,7 @@ from parsim.core import sdbd
 from parsim.core.shapes import bounding_radius, random_rotations, rod, sphere, tripod
 from parsim.job import parse_job
 from parsim.solvers import SOLVERS
-from parsim.solvers.deposition import deposition_inputs
+from parsim.deposition.solver import deposition_inputs
 
 from . import sediment_checks as sc
 

@@ -1,4 +1,4 @@
-"""Tests of size distributions given as sieve curves (parsim.core.sieve)."""
+"""Tests of size distributions given as sieve curves (parsim.deposition.sieve)."""
 
 import math
 import re
@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 
-from parsim.core.sieve import (
+from parsim.deposition.sieve import (
     SieveCurve,
     fraction_passing,
     mean_cubed_size,

@@ -14,8 +14,8 @@ import pytest
 import parsim
 from parsim.core import sdbd
 from parsim.core.sediment import CONTACT_GAP_TOLERANCE, filling_height, packing_fraction
-from parsim.solvers import deposition_statistics as statistics
-from parsim.solvers.deposition_materials import Drops, species_of
+from parsim.deposition import statistics as statistics
+from parsim.deposition.materials import Drops, species_of
 
 RADIUS = 0.5
 SPHERE_VOLUME = 4.0 / 3.0 * math.pi * RADIUS**3

@@ -1,4 +1,4 @@
-"""One TS aggregation decomposed over MPI ranks (parsim.parallel.tiled) against one process.
+"""One TS aggregation decomposed over MPI ranks (parsim.aggregation.tiled) against one process.
 
 ``tests/scripts/tiled_ts_probe.py`` runs a fixed-seed task on every rank of ``mpiexec -n K``;
 the runs on 1, 2 and 4 ranks (rank grids 1 x 1, 2 x 1, 2 x 2) must make the same links in
@@ -68,7 +68,7 @@ def test_the_decomposed_run_on_one_rank_is_the_serial_run(tmp_path):
     """Without mpiexec the domain is a no-op: the same code gives the serial result bitwise."""
     from mpi4py import MPI
 
-    from parsim.parallel.tiled import DecomposedDomain
+    from parsim.aggregation.tiled import DecomposedDomain
     from tests.scripts.tiled_ts_probe import initial_condition
 
     x, v, r, m, L = initial_condition(200, 0.2)
@@ -125,7 +125,7 @@ import json, sys
 from mpi4py import MPI
 from numba.core import event
 from parsim.core.ts import simulate_ts
-from parsim.parallel.tiled import DecomposedDomain
+from parsim.aggregation.tiled import DecomposedDomain
 sys.path.insert(0, sys.argv[1])
 from tests.scripts.tiled_ts_probe import TIME_STEP_FACTOR, initial_condition
 

@@ -19,13 +19,13 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-import parsim
 from parsim.errors import OutputError
 from parsim.job import Job
 from parsim.output.atomic import write_bytes_atomically
 from parsim.output.rows import RowLayout
 from parsim.output.snapshot import check_schema, provenance_attributes
 from parsim.solver import Solver, Statistic, coded_coordinate, flag_words, named_values, resolve_units
+from parsim.version import __version__
 
 WALL_TIME = Statistic("wall_time", "s", "wall-clock time of the task on its rank", measured=True)
 """Measured by the runner for every task, whatever the solver."""
@@ -205,7 +205,7 @@ def _global_attributes(job: Job, mpi_size: int, ranks_per_task: int) -> dict:
     return {
         "Conventions": "CF-1.10",
         "title": f"parsim {job.kind} job '{job.name}'",
-        "source": f"parsim {parsim.__version__}",
+        "source": f"parsim {__version__}",
         "history": f"{created} parsim run (job '{job.name}', {mpi_size} MPI ranks, {ranks_per_task} per task)",
         "references": REFERENCES,
         **provenance_attributes(),

@@ -36,11 +36,11 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-import parsim
 from parsim import options
 from parsim.errors import JobError, OutputError
 from parsim.output.atomic import written_atomically
 from parsim.output.voxels import image_grid, write_voxels
+from parsim.version import __version__
 
 EXPORT_FOLDER = "export"
 REAL = "%.17g"
@@ -76,7 +76,7 @@ class TaskSpheres:
     def describe(self) -> str:
         """One line naming the task, its job, kind and units, for the headers of the LAMMPS and YADE files."""
         return (f"task {self.label} of parsim job {str(self.attrs.get('job_name', ''))!r} ({self.kind}, "
-                f"{self.dimension}D, length unit {self.length_unit}), written by parsim {parsim.__version__}")
+                f"{self.dimension}D, length unit {self.length_unit}), written by parsim {__version__}")
 
 
 BODY_ARRAYS = {"spheres/particle": ("deposition", "particle"), "spheres/cluster": ("aggregation", "cluster")}

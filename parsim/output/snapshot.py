@@ -25,10 +25,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-import parsim
 from parsim.errors import JobError, OutputError
 from parsim.output.atomic import write_bytes_atomically, written_atomically
 from parsim.solver import Configuration, TaskResult
+from parsim.version import __version__
 
 STATISTICS_GROUP = "statistics"
 PARTS_SUFFIX = ".parts"
@@ -57,7 +57,7 @@ UNRECORDED_SCHEMA = 1
 
 def provenance_attributes() -> dict:
     """The parsim version and output schema, as attributes of every task file and of the dataset."""
-    return {VERSION_ATTRIBUTE: parsim.__version__, SCHEMA_ATTRIBUTE: OUTPUT_SCHEMA}
+    return {VERSION_ATTRIBUTE: __version__, SCHEMA_ATTRIBUTE: OUTPUT_SCHEMA}
 
 
 def check_schema(attrs, subject: str, folder: Path) -> None:
@@ -74,7 +74,7 @@ def check_schema(attrs, subject: str, folder: Path) -> None:
         written, writer = f"an older parsim ({recorded})", "the parsim that wrote it"
     else:
         written, writer = f"a newer parsim ({recorded})", "that parsim or a newer one"
-    raise JobError(f"{subject} was written by {written}; parsim {parsim.__version__} reads and writes output "
+    raise JobError(f"{subject} was written by {written}; parsim {__version__} reads and writes output "
                    f"schema {OUTPUT_SCHEMA}: read or finish it with {writer}, or compute the job again into "
                    f"another output folder (key 'output' or option --output) or after removing {folder}")
 

@@ -16,7 +16,7 @@ from mpi4py import MPI
 
 from parsim.core import sdbd
 from parsim.core.shapes import cube, random_rotations, rod, sphere, spiky, tripod
-from parsim.parallel.deposition import deposit_decomposed, deposit_streamed
+from parsim.deposition.spread import deposit_decomposed, deposit_streamed
 
 FIELDS = ("positions", "radii", "particle", "center_of_mass", "rotation", "contacts", "state", "event_counts",
           "steps", "stopped_at")

@@ -23,12 +23,12 @@ import numpy as np
 from mpi4py import MPI
 
 import parsim
-import parsim.parallel.deposition as decomposition
-import parsim.parallel.deposition_statistics as decomposed_statistics
+import parsim.deposition.spread as decomposition
+import parsim.deposition.spread_statistics as decomposed_statistics
 from parsim.core import sdbd, structure
-from parsim.solvers import deposition as solver
-from parsim.solvers import deposition_statistics as statistics
-from parsim.solvers.deposition_materials import Drops
+from parsim.deposition import solver
+from parsim.deposition import statistics as statistics
+from parsim.deposition.materials import Drops
 
 COMMON = {"packing_samples": 1000, "profile_bins": 20, "rdf_range": 1.5, "rdf_bins": 15, "orientation_bins": 9,
           "floor": "roll"}

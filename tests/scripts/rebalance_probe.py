@@ -12,7 +12,7 @@ import traceback
 import numpy as np
 from mpi4py import MPI
 
-from parsim.parallel.tiled import REBALANCE_ABOVE, DecomposedDomain
+from parsim.aggregation.tiled import REBALANCE_ABOVE, DecomposedDomain
 
 BOX = 40.0
 N = 2000

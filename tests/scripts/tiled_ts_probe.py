@@ -20,7 +20,7 @@ from mpi4py import MPI
 
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
 from parsim.core.ts import simulate_ts, stepper
-from parsim.parallel.tiled import DecomposedDomain
+from parsim.aggregation.tiled import DecomposedDomain
 
 RADIUS = 0.2
 TIME_STEP_FACTOR = 0.01

@@ -1,6 +1,6 @@
 """The rounds of one rank of a deposition spread over ranks, inside one jitted loop.
 
-The protocol and why its sediment is the serial one are in :mod:`parsim.parallel.deposition`.
+The protocol and why its sediment is the serial one are in :mod:`parsim.deposition.spread`.
 Here a rank runs its rounds without returning to Python, messaging only its *neighbours* (the
 ranks whose regions meet its own) through :mod:`parsim.core.kernel_mpi`, and it settles the
 next rows instead of idling whenever it waits:

@@ -1,6 +1,7 @@
 """Particles from closed triangle surface meshes (STL, OBJ) as unions of medial balls.
 
-:func:`mesh_particle` reads a closed, consistently oriented triangle mesh, possibly
+:func:`mesh_particle` takes a closed, consistently oriented triangle mesh (a
+:class:`ClosedMesh`, read from STL or OBJ by :mod:`parsim.deposition.mesh_file`), possibly
 non-convex, and approximates the solid it bounds by overlapping polydisperse spheres,
 each a *medial ball*: a ball inside the solid tangent to its surface.
 
@@ -67,7 +68,7 @@ samples in an x-slab: fine for meshes of a few thousand faces and a few thousand
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -103,22 +104,7 @@ MAX_REFINEMENTS = 6
 # Faces with area below this times the squared diagonal are left out of the distance
 # computations (in a closed mesh their points lie on the edges of other faces).
 DEGENERATE_AREA_RTOL = 1e-14
-# A mesh enclosing less than this times the cubed diagonal has no interior.
-ZERO_VOLUME_RTOL = 1e-12
 GOLDEN_FRACTION = (math.sqrt(5.0) - 1.0) / 2.0
-
-
-@dataclass(frozen=True)
-class MeshProperties:
-    """The solid bounded by a mesh, in the mesh's length units: volume, surface area,
-    centre of mass (uniform density), volume-equivalent radius (3 V / 4 pi)^(1/3) and
-    number of faces."""
-
-    volume: float
-    area: float
-    centre_of_mass: tuple
-    equivalent_radius: float
-    n_faces: int
 
 
 @dataclass(frozen=True)
@@ -140,54 +126,22 @@ class MeshFit:
     centre_of_mass: tuple
 
 
-# ---------------------------------------------------------------- reading and checks
+# ---------------------------------------------------------------- the closed surface
 
 
-def _load_mesh(path):
-    """The mesh in ``path``, checked (closed, consistently wound, with volume) and
-    oriented with outward normals."""
-    import trimesh  # here, not at the top: only mesh particles need it
+class ClosedMesh(NamedTuple):
+    """A closed, consistently wound triangle mesh with outward normals, as a reader checked it
+    (:func:`parsim.deposition.mesh_file.read_closed_mesh`): ``vertices`` (v, 3) float64, ``faces``
+    (f, 3) int64, the enclosed ``volume`` (> 0) and the ``diagonal`` of its bounding box."""
 
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"mesh file not found: {path}")
-    try:
-        mesh = trimesh.load(path, force="mesh")
-    except Exception as exc:  # trimesh's readers raise many exception types
-        raise ValueError(f"{path}: cannot be read as a triangle mesh ({exc})") from exc
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise ValueError(f"{path}: no triangles found")
-    if not mesh.is_watertight:
-        raise ValueError(f"{path}: the mesh is not closed (not watertight): "
-                         "some edges do not join exactly two faces")
-    if not mesh.is_winding_consistent:
-        raise ValueError(f"{path}: the winding of the faces is inconsistent "
-                         "(neighbouring faces point opposite ways)")
-    diagonal = float(np.linalg.norm(mesh.extents))
-    with np.errstate(invalid="ignore", divide="ignore"):  # trimesh's centre of mass: volume 0
-        volume = float(mesh.volume)
-    if abs(volume) <= ZERO_VOLUME_RTOL * diagonal**3:
-        raise ValueError(f"{path}: the mesh encloses no volume")
-    if volume < 0.0:  # consistently wound, but with inward normals
-        mesh.invert()
-    return mesh
+    vertices: np.ndarray
+    faces: np.ndarray
+    volume: float
+    diagonal: float
 
 
-def mesh_properties(path):
-    """:class:`MeshProperties` of the solid bounded by the mesh file ``path`` (STL, OBJ or
-    another format trimesh reads).  Raises ValueError naming the file if the mesh is not
-    closed, is inconsistently wound or encloses no volume (an inside-out mesh is turned)."""
-    mesh = _load_mesh(path)
-    volume = float(mesh.volume)
-    return MeshProperties(
-        volume=volume,
-        area=float(mesh.area),
-        centre_of_mass=tuple(float(x) for x in mesh.center_mass),
-        equivalent_radius=_equivalent_radius(volume),
-        n_faces=len(mesh.faces),
-    )
-
-
-def _equivalent_radius(volume):
+def equivalent_radius(volume):
+    """The radius of the sphere of ``volume``: (3 V / 4 pi)^(1/3)."""
     return (3.0 * volume / (4.0 * math.pi)) ** (1.0 / 3.0)
 
 
@@ -781,8 +735,8 @@ def _cover_levels(start, stop):
     return start * 0.5 ** np.arange(count)
 
 
-def mesh_particle(path, n_spheres=None, tolerance=None, samples=None):
-    """A particle template from the closed triangle mesh in ``path`` (STL, OBJ, ...).
+def mesh_particle(mesh, n_spheres=None, tolerance=None, samples=None):
+    """A particle template from the :class:`ClosedMesh` ``mesh``.
 
     The solid bounded by the mesh (possibly non-convex) is approximated by the union of
     medial balls chosen by a greedy cover of surface samples; the module docstring
@@ -795,13 +749,11 @@ def mesh_particle(path, n_spheres=None, tolerance=None, samples=None):
       refinement rounds run out (the returned fit tells).
 
     ``samples``: number of cover samples (default ``max(8 n_spheres, 2048)``, or 4096 in
-    tolerance mode).  Deterministic: the same file gives the same template.
+    tolerance mode).  Deterministic: the same mesh gives the same template.
 
     Returns ``(offsets, radii, fit)``: ``offsets`` (k, 3) float64, the sphere centres
     relative to the centre of mass of the union of the spheres, in the mesh's frame and
-    length units; ``radii`` (k,) float64; ``fit`` a :class:`MeshFit`.  Raises ValueError
-    naming the file if the mesh is not closed, is inconsistently wound or encloses no
-    volume.
+    length units; ``radii`` (k,) float64; ``fit`` a :class:`MeshFit`.
     """
     if (n_spheres is None) == (tolerance is None):
         raise ValueError("give exactly one of n_spheres and tolerance")
@@ -813,12 +765,9 @@ def mesh_particle(path, n_spheres=None, tolerance=None, samples=None):
         default_samples = TOLERANCE_SAMPLES
     samples = _check_int("samples", default_samples if samples is None else samples, 16)
 
-    mesh = _load_mesh(path)
-    volume = float(mesh.volume)
-    r_eq = _equivalent_radius(volume)
-    diagonal = float(np.linalg.norm(mesh.extents))
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    tris = _Triangles(vertices, np.asarray(mesh.faces, dtype=np.int64), diagonal)
+    vertices, volume, diagonal = mesh.vertices, mesh.volume, mesh.diagonal
+    r_eq = equivalent_radius(volume)
+    tris = _Triangles(vertices, mesh.faces, diagonal)
     evaluation = _Evaluation(tris, vertices, EVALUATION_FACTOR * samples)
 
     if n_spheres is not None:

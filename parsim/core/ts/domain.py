@@ -3,7 +3,7 @@
 The stepper (:mod:`parsim.core.ts.stepper`) keeps the rows of the spheres its process owns,
 named by their global ids, and calls the members of a *domain* wherever a step needs spheres
 or sums of other processes.  :class:`SerialDomain` owns every sphere and exchanges nothing;
-:class:`parsim.parallel.tiled.DecomposedDomain` shares the box out among MPI ranks with the
+:class:`parsim.aggregation.tiled.DecomposedDomain` shares the box out among MPI ranks with the
 same members, so the same stepper runs serially and decomposed (see docs/architecture.md).
 
 Members:

@@ -1,7 +1,7 @@
 """Assemble one DAHA minimisation (:class:`Problem`) from the spheres of one process.
 
 On one process the problem holds the moving spheres and the anchors.  In a decomposed run
-(:mod:`parsim.parallel.tiled`) it also holds *ghost* rows: spheres owned by other ranks, read
+(:mod:`parsim.aggregation.tiled`) it also holds *ghost* rows: spheres owned by other ranks, read
 like anchors, refreshed from their owners by the minimiser's exchange.  A ghost that moves on
 its owner is a *moving ghost*; its pairs and links with this rank's moving spheres are
 *cross* pairs and links, held by both ranks (each computes the same multiplier from the same

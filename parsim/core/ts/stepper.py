@@ -55,7 +55,7 @@ round moves every interacting sphere as before.
 
 Processes.  The run holds the rows of the spheres its process owns and reaches the others
 through a domain (:mod:`parsim.core.ts.domain`): on one process it owns everything; with
-:class:`parsim.parallel.tiled.DecomposedDomain` each MPI rank owns the spheres of its
+:class:`parsim.aggregation.tiled.DecomposedDomain` each MPI rank owns the spheres of its
 sub-box and reads its neighbours' as ghosts.  Links are made in sorted order, so the same
 links come out on any number of processes.
 """
@@ -790,7 +790,7 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
         Tiles per side (almost-rigid); ``None`` follows the law of :mod:`parsim.core.ts.tiles`.
         A minimisation that does not converge in them is solved again in one tile.
     domain : where the spheres live (:mod:`parsim.core.ts.domain`); default one process,
-        :class:`parsim.parallel.tiled.DecomposedDomain` for a run over MPI ranks.  Every rank
+        :class:`parsim.aggregation.tiled.DecomposedDomain` for a run over MPI ranks.  Every rank
         passes the same arguments and gets the same result.
 
     Raises

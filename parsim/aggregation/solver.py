@@ -8,7 +8,7 @@ final configuration.  ``method = "ed"`` is the exact event-driven method,
 ``method`` does not enter the seed, so both start from the same initial condition.
 
 On a group of several ranks (``parsim run --ranks-per-task K``) a TS task is
-decomposed over the group's ranks (:class:`parsim.parallel.tiled.DecomposedDomain`), or,
+decomposed over the group's ranks (:class:`parsim.aggregation.tiled.DecomposedDomain`), or,
 in a box too small for a block of tiles per rank, run whole in one tile on every rank of the
 group (the serial result); an ED task is serial: the group's rank 0 computes it and the other
 ranks wait.
@@ -291,7 +291,7 @@ def _domain(comm: "MPI.Comm", length: float, dimension: int, tiled: bool):
     """The tile decomposition of the box over ``comm``; None (serial) on one rank unless ``tiled``."""
     if comm.Get_size() == 1 and not tiled:
         return None
-    from parsim.parallel.tiled import DecomposedDomain  # here, so that `parsim validate` never initialises MPI
+    from parsim.aggregation.tiled import DecomposedDomain  # here, so that `parsim validate` never initialises MPI
 
     return DecomposedDomain(comm, length, dimension)
 

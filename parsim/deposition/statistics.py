@@ -25,7 +25,6 @@ the bulk when its centre of mass is.
 
 import math
 from dataclasses import dataclass, replace
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -43,7 +42,7 @@ from parsim.core.sediment import (
 )
 from parsim.parameters import Parameter
 from parsim.solver import LENGTH_UNITS, Coordinate, Statistic, coded_coordinate
-from parsim.solvers.deposition_materials import mesh_approximation, mesh_volume
+from parsim.deposition.materials import mesh_approximation, mesh_volume
 
 BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the deposit, z_b + BULK_SLAB (h - z_b), away from floor and surface
 # With walls the bulk keeps this many mean volume-equivalent particle diameters from them: there
@@ -318,12 +317,10 @@ class Whole:
         n_species = len(species)
         volume = np.array([exact_sum(*(part[k] for part in column["species_volume"])) for k in range(n_species)])
         moment = np.array([exact_sum(*(part[k] for part in column["species_moment"])) for k in range(n_species)])
-        extent = SimpleNamespace(positions=np.array([[*np.min(column["low"], axis=0), 0.0],
-                                                     [*np.max(column["high"], axis=0), 0.0]]),
-                                 radii=np.array([largest]))
         volume_total = exact_sum(*(e for part in column["species_volume"] for e in part))
         moment_total = exact_sum(*(e for part in column["species_moment"] for e in part))
-        return cls(params, tuple(species), substrate, measuring_region(params, geometry, extent, diameter),
+        return cls(params, tuple(species), substrate, measuring_region(params, geometry, np.min(column["low"], axis=0),
+                                                                np.max(column["high"], axis=0), largest, diameter),
                    pile_heights(volume_total, moment_total, substrate), n_particles, max(column["n_index"]),
                    mean_radius, diameter, largest, max(column["span"]), np.sum(column["species_count"], axis=0),
                    volume, moment)
@@ -395,7 +392,7 @@ def measure(params, result, species, drops, geometry, skip, substrate) -> dict:
     """Every statistic of a finished task (``result``: :class:`parsim.core.sdbd.DepositionResult`,
     ``geometry``: the container as the kernel took it, ``substrate``: (centres, radii), empty without one):
     :func:`combine` of the one part that is the whole sediment, the reduction a spread task makes over its
-    ranks (:mod:`parsim.parallel.deposition_statistics`)."""
+    ranks (:mod:`parsim.deposition.spread_statistics`)."""
     own = Particles.of_result(result)
     whole = Whole.of(params, species, geometry, substrate, [local_sums(own, species, drops)])
     region = whole.region
@@ -421,10 +418,10 @@ def measure(params, result, species, drops, geometry, skip, substrate) -> dict:
     return combine(whole, [part])
 
 
-def measuring_region(params, geometry, result, diameter) -> Region:
+def measuring_region(params, geometry, lowest_xy, highest_xy, largest_radius, diameter) -> Region:
     """The horizontal box over which packing and contacts are measured, and the bulk's area: with walls
-    ``BULK_WALL_DIAMETERS`` times the mean volume-equivalent particle ``diameter`` away from them (``result``:
-    anything with the sediment's extreme sphere ``positions`` and its largest ``radii``, for a heap's box)."""
+    ``BULK_WALL_DIAMETERS`` times the mean volume-equivalent particle ``diameter`` away from them (a heap's box:
+    around the sediment's spheres, whose centres' extremes are ``lowest_xy``, ``highest_xy``)."""
     wall_distance = BULK_WALL_DIAMETERS * diameter
     if geometry.cylinder is not None:
         x, y, radius, sides = geometry.cylinder
@@ -435,9 +432,8 @@ def measuring_region(params, geometry, result, diameter) -> Region:
         return Region(geometry.lower, geometry.upper, False, True, wall_distance=wall_distance)
     if params["lateral"] == "periodic":
         return Region(geometry.lower, geometry.upper, True, True)
-    reach = 2.0 * result.radii.max()  # so that periodic wrapping of the measurement meets no sphere twice
-    return Region(result.positions[:, :2].min(axis=0) - 2.0 * reach,
-                  result.positions[:, :2].max(axis=0) + 2.0 * reach, False, False)
+    reach = 2.0 * largest_radius  # so that periodic wrapping of the measurement meets no sphere twice
+    return Region(lowest_xy - 2.0 * reach, highest_xy + 2.0 * reach, False, False)
 
 
 def pile_heights(volume, moment, substrate) -> Heights:
@@ -532,7 +528,7 @@ def axis_part(whole, rotation, drops, in_bulk) -> dict:
     """A part's share of the orientation statistics: of its bulk particles' long axes u their number, the exact
     sums of u u and of P2(u_z), and the histogram of the angle to the vertical."""
     bins = whole.params["orientation_bins"]
-    axes = long_axes(SimpleNamespace(rotation=rotation), whole.species, drops)[in_bulk]
+    axes = long_axes(rotation, whole.species, drops)[in_bulk]
     axes = axes[np.all(np.isfinite(axes), axis=1)]
     unit = axes / np.linalg.norm(axes, axis=1)[:, None] if len(axes) else np.zeros((0, 3))
     return {"axes": len(axes), "moment": [sum_expansion(unit[:, a] * unit[:, b]) for a in range(3) for b in range(3)],
@@ -546,8 +542,7 @@ def count_part(whole, own, settled, skip) -> dict:
     timed (the particles from ``skip`` on) and the clock (``settled``: the particles' state, event counts and
     steps, and the clocked seconds)."""
     events = np.asarray(settled.event_counts, dtype=np.int64).reshape(-1, len(sdbd.EVENT_KINDS))
-    floor = particles_on_floor(SimpleNamespace(positions=own.positions, radii=own.radii,
-                                               particle=own.row_of_sphere()), whole.contact_tolerance())
+    floor = particles_on_floor(own.positions, own.radii, own.row_of_sphere(), whole.contact_tolerance())
     return {"spheres": len(own.radii), "events": events.sum(axis=0), "steps": int(np.max(settled.steps, initial=0)),
             "hanging": int(np.isin(settled.state, HANGING).sum()), "on_floor": floor,
             "timed_spheres": int(np.sum(np.repeat(own.index, own.count) >= skip)),
@@ -687,21 +682,23 @@ def _contacts(total, exact) -> dict:
             "fabric_tensor": exact("fabric").reshape(3, 3) / contacts if contacts else np.full((3, 3), np.nan)}
 
 
-def particles_on_floor(result, tolerance) -> int:
+def particles_on_floor(positions, radii, particle, tolerance) -> int:
     """Particles with a sphere touching the floor, z - r <= ``tolerance``, whatever state they rest in (with
-    floor = "roll" a particle on the floor rests on three contacts, the floor one of them)."""
-    touching = result.positions[:, 2] - result.radii <= tolerance
-    return int(np.unique(result.particle[touching]).size)
+    floor = "roll" a particle on the floor rests on three contacts, the floor one of them); ``particle``: the
+    particle of each sphere."""
+    touching = positions[:, 2] - radii <= tolerance
+    return int(np.unique(particle[touching]).size)
 
 
-def long_axes(result, species, drops) -> np.ndarray:
-    """Unit long axis of every particle in the lab frame (NaN rows for shapes without one)."""
+def long_axes(rotation, species, drops) -> np.ndarray:
+    """Unit long axis of every particle in the lab frame, turned by its ``rotation`` quaternion (NaN rows for
+    shapes without one)."""
     axes = np.full((len(drops.species), 3), np.nan)
     for index, s in enumerate(species):
         body_axis = structure.long_axis(s.offsets, s.radii)[0]
         mine = drops.species == index
         if np.all(np.isfinite(body_axis)) and mine.any():
-            axes[mine] = structure.lab_axes(result.rotation[mine], body_axis)
+            axes[mine] = structure.lab_axes(rotation[mine], body_axis)
     return axes
 
 

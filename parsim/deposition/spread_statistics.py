@@ -1,12 +1,12 @@
 """The statistics of a sediment spread over MPI ranks, measured where its particles lie.
 
 :func:`measure_decomposed` gives on every rank of a group the statistics that
-:func:`parsim.solvers.deposition_statistics.measure` gives for the gathered sediment, from the
-ranks' shares (:class:`parsim.parallel.deposition.DecomposedDeposition`). No rank holds more than
+:func:`parsim.deposition.statistics.measure` gives for the gathered sediment, from the
+ranks' shares (:class:`parsim.deposition.spread.DecomposedDeposition`). No rank holds more than
 its own particles, copies of the other ranks' particles within reach of them, and the substrate.
 
 Both are the same computation: each part of the sediment (the whole, for a serial task; a rank's
-particles here) makes its sums (:mod:`parsim.solvers.deposition_statistics`: ``local_sums``, then
+particles here) makes its sums (:mod:`parsim.deposition.statistics`: ``local_sums``, then
 ``contact_part``, ``rdf_part``, ``packing_part``, ``axis_part``, ``count_part``) and ``combine``
 makes the statistics of the parts' sums, in rank order. What this module adds is how a rank gets
 what its sums need:
@@ -60,9 +60,9 @@ from mpi4py import MPI
 
 from parsim.core import structure
 from parsim.parallel.collective import abort_if_alone
-from parsim.parallel.deposition import drop_order
-from parsim.solvers import deposition_statistics as serial
-from parsim.solvers.deposition_statistics import Particles
+from parsim.deposition.spread import drop_order
+from parsim.deposition import statistics as serial
+from parsim.deposition.statistics import Particles
 
 #: particle indices per block of the counts that find g(r)'s reference centres in the global list
 INDEX_BLOCK = 1024
@@ -71,8 +71,8 @@ REACH_SAFETY = 1.01
 
 
 def measure_decomposed(comm, params, share, species, drops, geometry, skip, substrate) -> dict:
-    """Every statistic of :func:`parsim.solvers.deposition_statistics.measure` of the sediment spread
-    over ``comm``, from this rank's ``share`` (:class:`parsim.parallel.deposition.DecomposedDeposition`).
+    """Every statistic of :func:`parsim.deposition.statistics.measure` of the sediment spread
+    over ``comm``, from this rank's ``share`` (:class:`parsim.deposition.spread.DecomposedDeposition`).
 
     ``drops``: the species and size factors of this rank's particles, aligned with ``share.index``;
     ``species``, ``geometry``, ``skip`` and ``substrate`` (centres, radii: the whole substrate on
@@ -259,7 +259,7 @@ def _contact_network(local, mean_radius):
 
 
 def _contact_part(whole, local, pairs, normals) -> dict:
-    """This rank's share of the contact statistics (:func:`parsim.solvers.deposition_statistics.contact_part`
+    """This rank's share of the contact statistics (:func:`parsim.deposition.statistics.contact_part`
     of its local spheres, counting its own particles)."""
     if local is None:
         return serial.contact_part(pairs, normals, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool),
@@ -307,7 +307,7 @@ def _rdf_part(comm, whole, own, local) -> dict:
 
 def _packing_cover(comm, whole, own, drops, own_overlapping):
     """This rank's measured spheres (its own, the substrate's on rank 0) placed in their frame, their overlap
-    flags, the frame and their :func:`parsim.solvers.deposition_statistics.packing_cover` (frame and cover None
+    flags, the frame and their :func:`parsim.deposition.statistics.packing_cover` (frame and cover None
     when it has no sphere or the container no packing fraction)."""
     spheres = serial.MeasuredSpheres.of(whole, own, drops, comm.Get_rank() == 0)
     flags = np.concatenate([np.ones(len(spheres.radii) - len(own.radii), dtype=bool), own_overlapping])

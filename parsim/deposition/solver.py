@@ -1,16 +1,16 @@
 """Sequential deposition of rigid multi-sphere particles (Topić & Pöschel 2016).
 
 One task: ``n_particles`` particles of one shape or of a mixture of species
-(:mod:`.deposition_materials`: each scaled by a factor from its size distribution, turned by
+(:mod:`.materials`: each scaled by a factor from its size distribution, turned by
 a uniformly random rotation, released at a random horizontal position above the sediment)
 follow the steepest descent of their centre of mass with the event-driven algorithm of
 sections 3 and 4, in a periodic or walled box, a cylinder or on an open floor, onto the
 floor or a fixed substrate; then the sediment's statistics are measured
-(:mod:`.deposition_statistics`).
+(:mod:`.statistics`).
 
 With ``parsim run --ranks-per-task K > 1`` a task's sediment is spread over its group's K ranks
-(:mod:`parsim.parallel.deposition`), bitwise the serial sediment, and stays spread: its statistics
-are reduced over the ranks (:mod:`parsim.parallel.deposition_statistics`) and each rank writes its
+(:mod:`parsim.deposition.spread`), bitwise the serial sediment, and stays spread: its statistics
+are reduced over the ranks (:mod:`parsim.deposition.spread_statistics`) and each rank writes its
 particles to its own file, joined by the task file (:mod:`parsim.output.snapshot`).
 """
 
@@ -32,8 +32,8 @@ from parsim.parameters import LARGEST_QUANTITY, REQUIRED, Parameter
 from parsim.phases import phase
 from parsim.progress import settled_reporter
 from parsim.solver import LENGTH_UNITS, Configuration, Solver, TableArray, TaskResult
-from parsim.solvers import deposition_statistics as statistics
-from parsim.solvers.deposition_materials import (
+from parsim.deposition import statistics
+from parsim.deposition.materials import (
     SPECIES_KEYS,
     Drops,
     Species,
@@ -472,7 +472,7 @@ def _spheres_of(params: dict, entry: dict) -> int:
 
 
 def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
-    """One task on the ranks of ``comm`` (:func:`parsim.parallel.deposition.deposit_streamed` on
+    """One task on the ranks of ``comm`` (:func:`parsim.deposition.spread.deposit_streamed` on
     several); every rank returns the statistics and its share of the configuration."""
     spread = comm is not None and comm.Get_size() > 1
     with phase("initial_condition"):
@@ -496,7 +496,7 @@ def solve(params: dict, rng: np.random.Generator, comm) -> TaskResult:
 @dataclass(frozen=True)
 class DepositionInputs:
     """A task's deposition as the kernels take it: the arguments of :func:`parsim.core.sdbd.deposit`
-    and of :func:`parsim.parallel.deposition.deposit_streamed` (``shapes``, the particles, ``container``,
+    and of :func:`parsim.deposition.spread.deposit_streamed` (``shapes``, the particles, ``container``,
     ``options``), and what the statistics and the configuration need besides."""
 
     shapes: tuple  # (shape_offsets, shape_radii, shape_start) of every species
@@ -574,8 +574,8 @@ def _solve_spread(comm, params, inputs: DepositionInputs, rehearsal: bool = Fals
     its share of the configuration.  ``rehearsal``: see :func:`rehearse_spread`."""
     from mpi4py import MPI
 
-    from parsim.parallel.deposition import deposit_streamed
-    from parsim.parallel.deposition_statistics import measure_decomposed
+    from parsim.deposition.spread import deposit_streamed
+    from parsim.deposition.spread_statistics import measure_decomposed
 
     with phase("steps"):  # the survey of the particles' inputs is a phase of its own
         share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options,
@@ -648,7 +648,7 @@ def _on_disc(uniform, radius, centre):
 
 def _configuration(params, geometry, result, species, drops, substrate, comm=None) -> Configuration:
     """The task file's configuration of the sediment ``result`` (a :class:`parsim.core.sdbd.DepositionResult`);
-    with ``comm``, this rank's share (a :class:`parsim.parallel.deposition.DecomposedDeposition`, ``drops``
+    with ``comm``, this rank's share (a :class:`parsim.deposition.spread.DecomposedDeposition`, ``drops``
     its particles') of a sediment spread over the ranks of ``comm`` (collective)."""
     top = float(np.max(result.positions[:, 2] + result.radii, initial=-np.inf))
     periodic = geometry.cylinder is None and params["lateral"] == "periodic"

@@ -29,8 +29,8 @@ import numpy as np
 
 from parsim.agglomerate_file import read_agglomerate
 from parsim.core import shapes as shape_library
-from parsim.core import sieve
-from parsim.core.shapes.mesh import mesh_particle
+from parsim.deposition import sieve
+from parsim.deposition.mesh_file import particle_from_mesh_file
 from parsim.errors import JobError
 from parsim.parameters import shown
 from parsim.progress import preparing
@@ -286,7 +286,7 @@ def mesh_volume(params: dict) -> float:
 
 @functools.lru_cache(maxsize=8)
 def _mesh_spheres(path: str, n_spheres: int):
-    """:func:`mesh_particle` of ``path``; a mesh it refuses is a one-line JobError.
+    """:func:`particle_from_mesh_file` of ``path``; a mesh it refuses is a one-line JobError.
 
     The RuntimeWarnings of trimesh and numpy computing with the file's coordinates are held back (they
     print two lines each, before parsim's): where the mesh is then refused, the first of them says why
@@ -296,7 +296,7 @@ def _mesh_spheres(path: str, n_spheres: int):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         try:
-            return mesh_particle(path, n_spheres=n_spheres)
+            return particle_from_mesh_file(path, n_spheres=n_spheres)
         except ValueError as error:
             raise JobError(f"mesh_file = {path!r}: {error}{_arithmetic_cause(caught)}") from None
         finally:
