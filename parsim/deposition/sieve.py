@@ -34,7 +34,6 @@ Conventions
   (a**-3 - d**-3) / (a**-3 - b**-3), inverted in closed form.
 """
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 

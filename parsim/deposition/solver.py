@@ -580,14 +580,14 @@ def _solve_spread(comm, params, inputs: DepositionInputs, rehearsal: bool = Fals
     with phase("steps"):  # the survey of the particles' inputs is a phase of its own
         share = deposit_streamed(comm, *inputs.shapes, inputs.kernel_chunks, *inputs.container, **inputs.options,
                                  rehearsal=rehearsal)
-    _check_sediment(params, share.stopped_at,
-                    comm.allreduce(bool(np.all(np.isfinite(share.positions))), op=MPI.LAND))
+    _check_sediment(params, share.result.stopped_at,
+                    comm.allreduce(bool(np.all(np.isfinite(share.result.positions))), op=MPI.LAND))
     own = Drops(share.particle_shape, share.particle_scale)
     with phase("statistics"):
         measured = measure_decomposed(comm, params, share, inputs.species, own, inputs.geometry, inputs.skip,
                                       inputs.substrate)
-    return TaskResult(measured, _configuration(params, inputs.geometry, share, inputs.species, own,
-                                               inputs.substrate, comm))
+    return TaskResult(measured, _configuration(params, inputs.geometry, share.result, inputs.species, own,
+                                               inputs.substrate, comm, share.index))
 
 
 def _check_sediment(params, stopped_at, finite) -> None:
@@ -646,10 +646,11 @@ def _on_disc(uniform, radius, centre):
     return np.column_stack([centre[0] + distance * np.cos(angle), centre[1] + distance * np.sin(angle)])
 
 
-def _configuration(params, geometry, result, species, drops, substrate, comm=None) -> Configuration:
+def _configuration(params, geometry, result, species, drops, substrate, comm=None, index=None) -> Configuration:
     """The task file's configuration of the sediment ``result`` (a :class:`parsim.core.sdbd.DepositionResult`);
-    with ``comm``, this rank's share (a :class:`parsim.deposition.spread.DecomposedDeposition`, ``drops``
-    its particles') of a sediment spread over the ranks of ``comm`` (collective)."""
+    with ``comm``, the result of this rank's share (:class:`parsim.deposition.spread.DecomposedDeposition`,
+    ``drops`` its particles', ``index`` their drop indices) of a sediment spread over the ranks of ``comm``
+    (collective)."""
     top = float(np.max(result.positions[:, 2] + result.radii, initial=-np.inf))
     periodic = geometry.cylinder is None and params["lateral"] == "periodic"
     if geometry.cylinder is None and params["lateral"] == "none":  # the heap's extent
@@ -670,7 +671,7 @@ def _configuration(params, geometry, result, species, drops, substrate, comm=Non
         bounds = np.array([top, -lower[0], -lower[1], upper[0], upper[1]], dtype=np.float64)
         comm.Allreduce(MPI.IN_PLACE, bounds, op=MPI.MAX)
         top, lower, upper = bounds[0], -bounds[1:3], bounds[3:5]
-        arrays["particles/index"] = result.index
+        arrays["particles/index"] = index
         rank_rows = tuple(arrays)
     attrs = {"floor_z": 0.0, "event_kinds": list(sdbd.EVENT_KINDS), "state_names": list(sdbd.STATE_NAMES),
              "shape_names": [s.name for s in species], "container": params["container"]}

@@ -74,7 +74,7 @@ import numpy as np
 from parsim.core import kernel_mpi, sdbd
 from parsim.core.sdbd import blocks, grid as grid_module, rounds, survey as survey_kernels
 from parsim.core.sdbd.blocks import FINAL, STOPPED
-from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, N_EVENT_KINDS
+from parsim.core.sdbd.constants import GEOM_COLUMN_X, GEOM_COLUMN_Y, LATERAL_NONE, LATERAL_PERIODIC, N_EVENT_KINDS
 from parsim.errors import JobError
 from parsim.parallel.collective import abort_if_alone
 from parsim.parallel.halo import kernel_link
@@ -205,50 +205,34 @@ class BlockLayout:
 
 @dataclass
 class DecomposedDeposition:
-    """One rank's share of a deposition spread over ranks: its committed particles (rows, in drop
-    order: their places in it, their shapes and size factors, and how they settled) and what the run
-    counted.  :meth:`gather` assembles the serial result on one rank."""
+    """One rank's share of a deposition spread over ranks.
 
+    ``result``: a :class:`parsim.core.sdbd.DepositionResult` of the rank's committed particles, in drop
+    order (its ``particle`` holds their drop indices; ``stopped_at`` and ``clocked_seconds`` are the whole
+    run's); ``index`` and ``sphere_count``: each particle's drop index and number of spheres;
+    ``particle_shape``, ``particle_scale``: its species and size factor; ``tally``: what the run counted.
+    :meth:`gather` assembles the serial result on one rank."""
+
+    result: sdbd.DepositionResult
     index: np.ndarray
+    sphere_count: np.ndarray
     particle_shape: np.ndarray
     particle_scale: np.ndarray
-    center_of_mass: np.ndarray
-    rotation: np.ndarray
-    contacts: np.ndarray
-    state: np.ndarray
-    event_counts: np.ndarray
-    steps: np.ndarray
-    sphere_count: np.ndarray
-    positions: np.ndarray
-    radii: np.ndarray
-    stopped_at: int
-    clocked_seconds: float
     tally: dict
-
-    @property
-    def particle(self) -> np.ndarray:
-        """The particle (drop index) of each sphere."""
-        return np.repeat(self.index, self.sphere_count)
 
     def gather(self, comm, root=0):
         """The :class:`parsim.core.sdbd.DepositionResult` of the whole sediment on rank ``root``
-        (None on the others)."""
-        parts = comm.gather(self, root=root)
+        (None on the others): the shares' particles and spheres in drop order."""
+        parts = comm.gather((self.result, self.index, self.sphere_count), root=root)
         if comm.Get_rank() != root:
             return None
-
-        def joined(name):
-            return np.concatenate([getattr(p, name) for p in parts])
-
-        index = joined("index")
-        counts = joined("sphere_count")
-        order, take = drop_order(index, counts)
-        return sdbd.DepositionResult(
-            positions=joined("positions")[take], radii=joined("radii")[take],
-            particle=np.repeat(index[order], counts[order]), center_of_mass=joined("center_of_mass")[order],
-            rotation=joined("rotation")[order], contacts=joined("contacts")[order], state=joined("state")[order],
-            event_counts=joined("event_counts")[order], steps=joined("steps")[order], stopped_at=self.stopped_at,
-            clocked_seconds=self.clocked_seconds)
+        results, indices, counts = zip(*parts)
+        order, take = drop_order(np.concatenate(indices), np.concatenate(counts))
+        per_sphere = {"positions", "radii", "particle"}
+        whole = {name: np.concatenate([getattr(r, name) for r in results])[take if name in per_sphere else order]
+                 for name in sdbd.DepositionResult._fields if name not in ("stopped_at", "clocked_seconds")}
+        return sdbd.DepositionResult(**whole, stopped_at=self.result.stopped_at,
+                                     clocked_seconds=self.result.clocked_seconds)
 
 
 def deposit_decomposed(comm, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
@@ -712,10 +696,14 @@ class _RankRun:
                  "idle_seconds": float(counts[rounds.IDLE_SECONDS]),
                  "messages": int(link[kernel_mpi.LINK_MESSAGES]), "particles": int(np.count_nonzero(final)),
                  "chunk_steps": int(rows.chunks[kept].sum()), "jitter_seed": int(self.plan.jitter_seed)}
-        return DecomposedDeposition(rows.index[kept], self.prep.particle_shape[kept], self.prep.particle_scale[kept],
-                                    rows.com[kept], rows.rotation[kept], rows.contacts[kept], rows.state[kept],
-                                    rows.events[kept], rows.steps[kept], rows.count[kept], rows.spheres[spheres],
-                                    self.radius[slots].copy(), stopped_at, clocked_seconds, tally)
+        index, count = rows.index[kept], rows.count[kept]
+        result = sdbd.DepositionResult(
+            positions=rows.spheres[spheres], radii=self.radius[slots].copy(), particle=np.repeat(index, count),
+            center_of_mass=rows.com[kept], rotation=rows.rotation[kept], contacts=rows.contacts[kept],
+            state=rows.state[kept], event_counts=rows.events[kept], steps=rows.steps[kept], stopped_at=stopped_at,
+            clocked_seconds=clocked_seconds)
+        return DecomposedDeposition(result, index, count, self.prep.particle_shape[kept],
+                                    self.prep.particle_scale[kept], tally)
 
 
 def _compile_for(kernel, *arguments) -> None:
@@ -758,4 +746,4 @@ def _column_side(prep, cell) -> float:
     centres within this distance of it."""
     geom = grid_module.grid_new(prep.lateral, prep.box_lower_xy, prep.box_upper_xy, cell, 1, prep.polygon,
                                 prep.n_sides)[0]
-    return float(max(geom[4], geom[5]))
+    return float(max(geom[GEOM_COLUMN_X], geom[GEOM_COLUMN_Y]))

@@ -79,7 +79,7 @@ def measure_decomposed(comm, params, share, species, drops, geometry, skip, subs
     every rank) as ``measure`` takes them. Collective; returns the same dict on every rank.
     """
     try:
-        own = _own(share)
+        own = Particles.of_result(share.result, share.index, share.sphere_count)
         whole = serial.Whole.of(params, species, geometry, substrate,
                                 comm.allgather(serial.local_sums(own, species, drops)))
         in_bulk = whole.in_bulk(own.com)
@@ -92,19 +92,12 @@ def measure_decomposed(comm, params, share, species, drops, geometry, skip, subs
         lower, upper = (frame.lower, frame.upper) if frame is not None else (None, None)
         part = {**_contact_part(whole, local, pairs, normals), **_rdf_part(comm, whole, own, local),
                 "packing": serial.packing_part(whole, spheres, flags, cover, lower, upper),
-                **serial.axis_part(whole, np.asarray(share.rotation), drops, in_bulk),
-                **serial.count_part(whole, own, share, skip)}
+                **serial.axis_part(whole, np.asarray(share.result.rotation), drops, in_bulk),
+                **serial.count_part(whole, own, share.result, skip)}
         return serial.combine(whole, comm.allgather(part))
     except BaseException as error:
         abort_if_alone(comm, error)  # the other ranks would wait in a collective
         raise
-
-
-def _own(share) -> Particles:
-    """A rank's own particles: its share of the sediment."""
-    points = [np.asarray(a, dtype=np.float64).reshape(-1, 3) for a in (share.center_of_mass, share.positions)]
-    return Particles(np.asarray(share.index, dtype=np.int64), points[0], np.asarray(share.sphere_count, dtype=np.int64),
-                     points[1], np.asarray(share.radii, dtype=np.float64))
 
 
 def _joined(parts) -> Particles:

@@ -239,12 +239,14 @@ class Particles:
     radii: np.ndarray
 
     @classmethod
-    def of_result(cls, result) -> "Particles":
-        """Every particle of a :class:`parsim.core.sdbd.DepositionResult`."""
+    def of_result(cls, result, index=None, count=None) -> "Particles":
+        """The particles of a :class:`parsim.core.sdbd.DepositionResult`: a serial task's all, or a rank's share
+        of a spread one, whose particles' drop ``index`` and sphere ``count`` it gives."""
         n = len(result.center_of_mass)
-        return cls(np.arange(n, dtype=np.int64), np.asarray(result.center_of_mass, dtype=np.float64).reshape(-1, 3),
-                   np.bincount(result.particle, minlength=n).astype(np.int64),
-                   np.asarray(result.positions, dtype=np.float64).reshape(-1, 3),
+        if index is None:
+            index, count = np.arange(n, dtype=np.int64), np.bincount(result.particle, minlength=n)
+        return cls(np.asarray(index, dtype=np.int64), np.asarray(result.center_of_mass, dtype=np.float64).reshape(-1, 3),
+                   np.asarray(count, dtype=np.int64), np.asarray(result.positions, dtype=np.float64).reshape(-1, 3),
                    np.asarray(result.radii, dtype=np.float64))
 
     def subset(self, chosen) -> "Particles":

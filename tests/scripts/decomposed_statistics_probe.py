@@ -181,10 +181,13 @@ def lattice_share(comm, side=24, layers=12):
     n = len(mine)
     events = np.zeros((n, len(sdbd.EVENT_KINDS)), dtype=np.int32)
     rotation = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
-    return decomposition.DecomposedDeposition(
-        mine.astype(np.int64), np.zeros(n, dtype=np.int64), np.ones(n), com[mine], rotation,
-        np.full(n, 6, dtype=np.int8), np.full(n, sdbd.RESTING_THREE_CONTACTS, dtype=np.int8), events,
-        np.ones(n, dtype=np.int32), np.ones(n, dtype=np.int64), com[mine], np.full(n, 0.5), -1, 1.0, {})
+    result = sdbd.DepositionResult(
+        positions=com[mine], radii=np.full(n, 0.5), particle=mine.astype(np.int64), center_of_mass=com[mine],
+        rotation=rotation, contacts=np.full(n, 6, dtype=np.int8),
+        state=np.full(n, sdbd.RESTING_THREE_CONTACTS, dtype=np.int8), event_counts=events,
+        steps=np.ones(n, dtype=np.int32), stopped_at=-1, clocked_seconds=1.0)
+    return decomposition.DecomposedDeposition(result, mine.astype(np.int64), np.ones(n, dtype=np.int64),
+                                              np.zeros(n, dtype=np.int64), np.ones(n), {})
 
 
 def lattice_case(comm) -> dict | None:

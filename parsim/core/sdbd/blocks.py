@@ -42,9 +42,19 @@ import numpy as np
 from parsim.core.jit import jit
 from parsim.core.sdbd import reads as read_box
 from parsim.core.sdbd.bundles import Settings, grid_arrays, new_grid, new_particle, new_workspace, sediment_in
-from parsim.core.sdbd.constants import EVENT_LIMIT, LATERAL_PERIODIC, LATERAL_WALLS, WALL_FRICTIONLESS, VIRTUAL_ANGLE
+from parsim.core.sdbd.constants import (
+    EVENT_LIMIT,
+    GEOM_CELL,
+    GEOM_LENGTH_X,
+    GEOM_LENGTH_Y,
+    IGEOM_MODE,
+    LATERAL_PERIODIC,
+    LATERAL_WALLS,
+    VIRTUAL_ANGLE,
+    WALL_FRICTIONLESS,
+)
 from parsim.core.sdbd.cycling import new_descent_history
-from parsim.core.sdbd.engine import _descend, _search_margin, join_sediment, largest_diameter, regrid
+from parsim.core.sdbd.engine import _descend, _search_margin, join_sediment, largest_diameter
 from parsim.core.sdbd.grid import grid_collect_growing, grid_insert_ordered, grid_remove, wrap_position
 from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.rotation import matrix_to_quat
@@ -128,10 +138,10 @@ def _withdraw_met(first, last, box, by_footprint, rows, centre, radius, grid_sta
     any_met = False
     for o in range(first, last):
         if by_footprint:
-            met = status[o] == PRESENT and box_meets(box, footprint[o], margin, geom[2], geom[3], periodic)
+            met = status[o] == PRESENT and box_meets(box, footprint[o], margin, geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y], periodic)
         else:
             met = ((status[o] == PRESENT or status[o] == STOPPED) and rows.settled_at[o] > settled_after
-                   and box_meets(rectangle[o], box, margin, geom[2], geom[3], periodic))
+                   and box_meets(rectangle[o], box, margin, geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y], periodic))
         if met:
             withdraw(o, rows, centre, radius, grid_state, now)
             any_met = True
@@ -148,8 +158,8 @@ def insert_committed(n_particles, particle_count, particle_footprint, sphere_key
     are withdrawn first (at ``now``, a count of descents).  Returns the grid's arrays."""
     geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
     status, rectangle = rows.status, rows.rectangle
-    periodic = igeom[0] == LATERAL_PERIODIC
-    marked, origin, width = mark_strips(particle_footprint, n_particles, 0.0, geom[2], periodic)
+    periodic = igeom[IGEOM_MODE] == LATERAL_PERIODIC
+    marked, origin, width = mark_strips(particle_footprint, n_particles, 0.0, geom[GEOM_LENGTH_X], periodic)
     for o in range(first_row, last_row):
         if status[o] != PRESENT and status[o] != STOPPED:
             continue
@@ -157,7 +167,7 @@ def insert_committed(n_particles, particle_count, particle_footprint, sphere_key
         if not meets_strips(box[0] - margin, box[1] + margin, marked, origin, width, periodic):
             continue
         for k in range(n_particles):
-            if box_meets(box, particle_footprint[k], margin, geom[2], geom[3], periodic):
+            if box_meets(box, particle_footprint[k], margin, geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y], periodic):
                 withdraw(o, rows, centre, radius, (geom, igeom, head, col_top, nxt, hkeys, hval, counts), now)
                 break
     j = first_slot
@@ -213,9 +223,9 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
     floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell = settings
     virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
     descent = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
-                       grid.igeom[0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, False)
+                       grid.igeom[IGEOM_MODE] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, False)
     sediment = sediment_in(centre, radius)
-    periodic = grid.igeom[0] == LATERAL_PERIODIC
+    periodic = grid.igeom[IGEOM_MODE] == LATERAL_PERIODIC
     status, footprint, rectangle, slot = rows.status, rows.footprint, rows.rectangle, rows.slot
     for o in range(first, last):
         was = status[o]
@@ -284,7 +294,7 @@ def _settle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle
     read_box.forget(work.reads)
     n, _ = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                          particle_rotation, particle_drop_xy, sediment, grid, ell, particle, work.reads, given_top)
-    if largest_diameter(n, particle) > grid.geom[6]:
+    if largest_diameter(n, particle) > grid.geom[GEOM_CELL]:
         raise ValueError("a particle larger than the grid's cell: grow the grid first (drop_top)")
     state, n_c, steps, chunk_ends, _, buf = _descend(n, particle, work, history, sediment, grid, settings, events,
                                                      False, trace, buf)
@@ -371,11 +381,11 @@ def lay_substrate(positions, radii, region, centre, radius, key, grid_state):
     (:func:`.engine.join_sediment`).  Returns their number and the grid's arrays."""
     grid = new_grid(*grid_state)
     sediment = sediment_in(centre, radius)
-    periodic = grid.igeom[0] == LATERAL_PERIODIC
+    periodic = grid.igeom[IGEOM_MODE] == LATERAL_PERIODIC
     n = 0
     for j in range(radii.shape[0]):
         wx, _ = wrap_position(grid.geom, grid.igeom, positions[j, 0], positions[j, 1])
-        if interval_within(wx, wx, region[0], region[1], grid.geom[2], periodic):
+        if interval_within(wx, wx, region[0], region[1], grid.geom[GEOM_LENGTH_X], periodic):
             key[n] = j
             join_sediment(n, positions[j, 0], positions[j, 1], positions[j, 2], radii[j], sediment, grid, key)
             n += 1
@@ -423,10 +433,10 @@ def read_signature(box, margin, below_key, grid_state, centre, key):
     Taken when a row is settled and again when it is committed, it checks the invariant that makes
     the decomposed sediment the serial one: what a descent read is final when it is committed."""
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_state
-    periodic = igeom[0] == LATERAL_PERIODIC
+    periodic = igeom[IGEOM_MODE] == LATERAL_PERIODIC
     buf = np.empty(1024, dtype=np.int64)
     n, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval, box[0] - margin, box[1] + margin,
-                                  box[2] - margin, box[3] + margin, 0.0, (head.shape[0] + 1) * geom[6], buf)
+                                  box[2] - margin, box[3] + margin, 0.0, (head.shape[0] + 1) * geom[GEOM_CELL], buf)
     count = 0
     digest = np.uint64(0)
     bits = centre.view(np.uint64)
@@ -436,8 +446,8 @@ def read_signature(box, margin, below_key, grid_state, centre, key):
             continue
         x = centre[j, 0]
         y = centre[j, 1]
-        if not (interval_within(x, x, box[0] - margin, box[1] + margin, geom[2], periodic)
-                and interval_within(y, y, box[2] - margin, box[3] + margin, geom[3], periodic)):
+        if not (interval_within(x, x, box[0] - margin, box[1] + margin, geom[GEOM_LENGTH_X], periodic)
+                and interval_within(y, y, box[2] - margin, box[3] + margin, geom[GEOM_LENGTH_Y], periodic)):
             continue
         count += 1
         digest += _mix(np.uint64(key[j]) ^ _mix(bits[j, 0] ^ _mix(bits[j, 1] ^ _mix(bits[j, 2]))))
@@ -453,8 +463,8 @@ def _count_held(box, margin, below_key, geom, periodic, centre, radius, key):
         if radius[j] > 0.0 and 0 <= key[j] < below_key:
             x = centre[j, 0]
             y = centre[j, 1]
-            if (interval_within(x, x, box[0] - margin, box[1] + margin, geom[2], periodic)
-                    and interval_within(y, y, box[2] - margin, box[3] + margin, geom[3], periodic)):
+            if (interval_within(x, x, box[0] - margin, box[1] + margin, geom[GEOM_LENGTH_X], periodic)
+                    and interval_within(y, y, box[2] - margin, box[3] + margin, geom[GEOM_LENGTH_Y], periodic)):
                 count += 1
     return count
 

@@ -104,7 +104,7 @@ Sediment = bundle("Sediment", ["centre", "radius"])
 #: The neighbour grid of the sediment, the arrays of :mod:`.grid` in its order (``head``,
 #: ``col_top``, ``hkeys`` and ``hval`` are replaced by larger ones as the pile grows, all of
 #: them when a particle with a larger sphere than the cell allows arrives: :func:`set_grid_arrays`).
-#: Its cell ``geom[6]`` is the largest sphere diameter so far, so half of it bounds every
+#: Its cell ``geom[GEOM_CELL]`` is the largest sphere diameter so far, so half of it bounds every
 #: sediment radius.  ``memory`` holds the arrays the fields borrow from, in the same order.
 Grid = bundle("Grid", ["geom", "igeom", "head", "col_top", "nxt", "hkeys", "hval", "counts", "memory"])
 

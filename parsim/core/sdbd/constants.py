@@ -15,6 +15,17 @@ LATERAL_WALLS = 1
 #: No lateral boundary: a heap on an unbounded floor.
 LATERAL_NONE = 2
 
+# --------------------------------------------------------------------------- the grid's geometry
+# The sediment grid (:mod:`.grid`) carries its geometry in two arrays that kernels index by
+# these names. ``geom`` (float64): the box's lower corner and side lengths, the columns' sides
+# and the cell (the largest sphere diameter so far, also the layers' height), then from
+# GEOM_CONTAINER on the cylinder's polygon (:mod:`.polygon`). ``igeom`` (int64): the lateral
+# mode, the number of columns along x and y (periodic and walled boxes), the polygon's sides
+# (0 for the box).
+GEOM_LOWER_X, GEOM_LOWER_Y, GEOM_LENGTH_X, GEOM_LENGTH_Y, GEOM_COLUMN_X, GEOM_COLUMN_Y, GEOM_CELL = range(7)
+GEOM_CONTAINER = 7
+IGEOM_MODE, IGEOM_COLUMNS_X, IGEOM_COLUMNS_Y, IGEOM_SIDES = range(4)
+
 #: The lateral walls of LATERAL_WALLS are the four faces of the box.
 CONTAINER_BOX = 0
 #: The lateral wall of LATERAL_WALLS is a cylinder, modelled as the regular polygon of planar

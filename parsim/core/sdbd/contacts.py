@@ -21,14 +21,20 @@ from parsim.core.jit import jit
 from parsim.core.sdbd.bundles import geometry_arrays, grid_arrays
 from parsim.core.sdbd.constants import (
     CYCLE_CLOSE_GAP,
+    GEOM_CELL,
+    GEOM_LENGTH_X,
+    GEOM_LENGTH_Y,
+    GEOM_LOWER_X,
+    GEOM_LOWER_Y,
+    IGEOM_SIDES,
     MAX_CONTACTS,
     OB_FLOOR,
     OB_SIDE,
     OB_SPHERE,
     OB_WALL_XHI,
     OB_WALL_XLO,
-    OB_WALL_YLO,
     OB_WALL_YHI,
+    OB_WALL_YLO,
     TOUCH_TOL,
 )
 from parsim.core.sdbd.grid import grid_collect_growing, min_image
@@ -58,17 +64,17 @@ def plane_of(ob, j, r, geom, nrm):
         return r
     if ob == OB_WALL_XLO:
         nrm[0] = 1.0
-        return geom[0] + r
+        return geom[GEOM_LOWER_X] + r
     if ob == OB_WALL_XHI:
         nrm[0] = -1.0
-        return -(geom[0] + geom[2] - r)
+        return -(geom[GEOM_LOWER_X] + geom[GEOM_LENGTH_X] - r)
     if ob == OB_WALL_YLO:
         nrm[1] = 1.0
-        return geom[1] + r
+        return geom[GEOM_LOWER_Y] + r
     if ob == OB_SIDE:
         return side_plane(geom, j, r, nrm)
     nrm[1] = -1.0
-    return -(geom[1] + geom[3] - r)
+    return -(geom[GEOM_LOWER_Y] + geom[GEOM_LENGTH_Y] - r)
 
 
 @jit(inline="always")
@@ -199,7 +205,7 @@ def near_contacts(n, particle, n_c, contacts, sediment, grid, walls, ell, buf, n
     for i in range(n):
         if n_c >= MAX_CONTACTS:
             break
-        reach = rad[i] + 0.5 * geom[6] + lim
+        reach = rad[i] + 0.5 * geom[GEOM_CELL] + lim
         cnt, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval,
                                         pos[i, 0] - reach, pos[i, 0] + reach, pos[i, 1] - reach,
                                         pos[i, 1] + reach, pos[i, 2] - reach, pos[i, 2] + reach, buf)
@@ -218,7 +224,7 @@ def near_contacts(n, particle, n_c, contacts, sediment, grid, walls, ell, buf, n
                 break
             n_c = add_contact(n_c, contacts, i, OB_SPHERE, j, mx - rx, my - ry)
             added += 1
-        n_sides = igeom[3]
+        n_sides = igeom[IGEOM_SIDES]
         last = OB_WALL_YHI if walls and n_sides == 0 else OB_FLOOR
         for ob in range(OB_FLOOR, last + 1):
             n_c, new = _close_plane(n_c, contacts, i, ob, -1, pos, rad, geom, lim, nrm)

@@ -62,8 +62,15 @@ from parsim.core.sdbd.constants import (
     CYCLE_CLOSE_GAP,
     EVENT_LIMIT,
     FLOOR_STOP,
+    GEOM_CELL,
+    GEOM_LENGTH_X,
+    GEOM_LENGTH_Y,
+    GEOM_LOWER_X,
+    GEOM_LOWER_Y,
     HANGING_ONE,
     HANGING_TWO,
+    IGEOM_MODE,
+    IGEOM_SIDES,
     K_SIMULTANEOUS,
     LATERAL_PERIODIC,
     LATERAL_WALLS,
@@ -144,7 +151,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     # section 4.1 for it); VIRTUAL_ANGLE only when the trial test is disabled
     virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
     settings = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
-                        igeom[0] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, debug)
+                        igeom[IGEOM_MODE] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, debug)
     grid = new_grid(geom, igeom, head, col_top, nxt, hkeys, hval, counts)
     # the caller keeps the outputs alive: the record borrows them
     record = Record(borrowed(out_particle), borrowed(out_com), borrowed(out_rot), borrowed(out_contacts),
@@ -189,7 +196,7 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
             out_state[p] = EVENT_LIMIT
             stopped_at = p
             break
-        if igeom[0] == LATERAL_PERIODIC:
+        if igeom[IGEOM_MODE] == LATERAL_PERIODIC:
             cx, cy = wrap_position(grid.geom, grid.igeom, particle.com[0], particle.com[1])
             particle.com[0] = cx
             particle.com[1] = cy
@@ -307,7 +314,7 @@ def _fit_grid(n, particle, sediment, n_sed, grid):
     spheres: when it is larger than any before, the grid is built anew with that cell and the
     ``n_sed`` sediment spheres are inserted again in their order."""
     cell = largest_diameter(n, particle)
-    if cell > grid.geom[6]:
+    if cell > grid.geom[GEOM_CELL]:
         regrid(grid, cell, sediment.centre, np.arange(n_sed))
 
 
@@ -326,7 +333,7 @@ def regrid(grid, cell, centre, order):
     ``centre``) in that order, each the newest of its cell."""
     geom = grid.geom
     geom, igeom, head, col_top, nxt, hkeys, hval, counts = empty_grid(
-        grid.igeom[0], geom[0], geom[1], geom[2], geom[3], cell, 1, geom[GEOM_CONTAINER:], grid.igeom[3])
+        grid.igeom[IGEOM_MODE], geom[GEOM_LOWER_X], geom[GEOM_LOWER_Y], geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y], cell, 1, geom[GEOM_CONTAINER:], grid.igeom[IGEOM_SIDES])
     nxt = grid.nxt
     for j in order:
         head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j,
@@ -338,7 +345,7 @@ def regrid(grid, cell, centre, order):
 def _search_margin(grid, ell):
     """How far beyond a sphere's surface the fall and the closing of near obstacles search the
     grid: the largest sediment radius (half the cell) and the gap of 4.2."""
-    return 0.5 * grid.geom[6] + CYCLE_CLOSE_GAP * ell
+    return 0.5 * grid.geom[GEOM_CELL] + CYCLE_CLOSE_GAP * ell
 
 
 @jit(inline="always")

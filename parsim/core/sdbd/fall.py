@@ -10,6 +10,7 @@ from parsim.core.jit import jit
 from parsim.core.sdbd.bundles import grid_arrays, window_arrays
 from parsim.core.sdbd.constants import (
     EV_CONTACT,
+    GEOM_CELL,
     K_FALL_CONTACT,
     K_FLOOR_CONTACT,
     OB_FLOOR,
@@ -82,7 +83,7 @@ def fall_events(n, particle, sediment, grid, ell, window, counters):
     sed = sediment.centre
     sed_r = sediment.radius
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
-    cell = geom[6]
+    cell = geom[GEOM_CELL]
     r_max_sed = 0.5 * cell  # bounds every sediment radius
     tolz = SIMULTANEOUS_TOL * ell
     best = np.inf

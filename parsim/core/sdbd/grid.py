@@ -24,9 +24,11 @@ the cells of the surface of the pile, where all queries happen, share few memory
 State is kept in plain arrays so that numba kernels can own and grow it:
 
 ``geom``     float64 ``[lo_x, lo_y, L_x, L_y, ax, ay, az]``, then the cylinder's polygon if any
-             (:mod:`.polygon`)
+             (:mod:`.polygon`), read by name: ``geom[GEOM_CELL]`` is the cell (az), and so on
+             (:mod:`.constants`: ``GEOM_LOWER_X`` ... ``GEOM_CELL``, ``GEOM_CONTAINER``)
 ``igeom``    int64 ``[mode, ncx, ncy, n_sides]`` (mode = lateral boundary code, n_sides the
-             polygon's sides, 0 for the box)
+             polygon's sides, 0 for the box), read by name: ``IGEOM_MODE``, ``IGEOM_COLUMNS_X``,
+             ``IGEOM_COLUMNS_Y``, ``IGEOM_SIDES``
 ``head``     int64 ``(n_layer_capacity, n_col_capacity)``
 ``col_top``  int64 ``(n_col_capacity,)``
 ``nxt``      int64 ``(n_spheres_capacity,)``
@@ -39,7 +41,21 @@ import math
 import numpy as np
 
 from parsim.core.jit import jit
-from parsim.core.sdbd.constants import LATERAL_NONE, LATERAL_PERIODIC, LATERAL_WALLS
+from parsim.core.sdbd.constants import (
+    GEOM_CELL,
+    GEOM_COLUMN_X,
+    GEOM_COLUMN_Y,
+    GEOM_LENGTH_X,
+    GEOM_LENGTH_Y,
+    GEOM_LOWER_X,
+    GEOM_LOWER_Y,
+    IGEOM_COLUMNS_X,
+    IGEOM_COLUMNS_Y,
+    IGEOM_MODE,
+    LATERAL_NONE,
+    LATERAL_PERIODIC,
+    LATERAL_WALLS,
+)
 
 __all__ = [
     "grid_new",
@@ -118,14 +134,14 @@ def _hash(ix, iy, mask):
 @jit
 def column_lookup(igeom, hkeys, hval, ix, iy):
     """Column id of the integer column ``(ix, iy)`` or -1 (walled box outside, or unused)."""
-    mode = igeom[0]
+    mode = igeom[IGEOM_MODE]
     if mode == LATERAL_PERIODIC:
-        ncx = igeom[1]
-        return _wrapped(ix, ncx) + ncx * _wrapped(iy, igeom[2])
+        ncx = igeom[IGEOM_COLUMNS_X]
+        return _wrapped(ix, ncx) + ncx * _wrapped(iy, igeom[IGEOM_COLUMNS_Y])
     if mode == LATERAL_WALLS:
-        if ix < 0 or iy < 0 or ix >= igeom[1] or iy >= igeom[2]:
+        if ix < 0 or iy < 0 or ix >= igeom[IGEOM_COLUMNS_X] or iy >= igeom[IGEOM_COLUMNS_Y]:
             return -1
-        return ix + igeom[1] * iy
+        return ix + igeom[IGEOM_COLUMNS_X] * iy
     mask = hval.shape[0] - 1
     k = _hash(ix, iy, mask)
     while True:
@@ -152,21 +168,21 @@ def _wrapped(i, n):
 @jit
 def wrap_position(geom, igeom, x, y):
     """Position folded into the periodic box (unchanged for other boundaries)."""
-    if igeom[0] == LATERAL_PERIODIC:
-        x = geom[0] + (x - geom[0]) % geom[2]
-        y = geom[1] + (y - geom[1]) % geom[3]
+    if igeom[IGEOM_MODE] == LATERAL_PERIODIC:
+        x = geom[GEOM_LOWER_X] + (x - geom[GEOM_LOWER_X]) % geom[GEOM_LENGTH_X]
+        y = geom[GEOM_LOWER_Y] + (y - geom[GEOM_LOWER_Y]) % geom[GEOM_LENGTH_Y]
         # round-off of % can give exactly L
-        if x >= geom[0] + geom[2]:
-            x -= geom[2]
-        if y >= geom[1] + geom[3]:
-            y -= geom[3]
+        if x >= geom[GEOM_LOWER_X] + geom[GEOM_LENGTH_X]:
+            x -= geom[GEOM_LENGTH_X]
+        if y >= geom[GEOM_LOWER_Y] + geom[GEOM_LENGTH_Y]:
+            y -= geom[GEOM_LENGTH_Y]
     return x, y
 
 
 @jit
 def min_image(geom, igeom, dx, dy):
     """Minimum-image lateral difference (unchanged for other boundaries)."""
-    return periodic_image(igeom[0] == LATERAL_PERIODIC, geom[2], geom[3], dx, dy)
+    return periodic_image(igeom[IGEOM_MODE] == LATERAL_PERIODIC, geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y], dx, dy)
 
 
 @jit
@@ -188,8 +204,8 @@ def periodic_image(periodic, length_x, length_y, dx, dy):
 
 @jit
 def _column_index(geom, x, y):
-    ix = int(math.floor((x - geom[0]) / geom[4]))
-    iy = int(math.floor((y - geom[1]) / geom[5]))
+    ix = int(math.floor((x - geom[GEOM_LOWER_X]) / geom[GEOM_COLUMN_X]))
+    iy = int(math.floor((y - geom[GEOM_LOWER_Y]) / geom[GEOM_COLUMN_Y]))
     return ix, iy
 
 
@@ -267,7 +283,7 @@ def grid_remove(geom, igeom, head, col_top, nxt, hkeys, hval, j, x, y, z):
     layer comes down to the highest layer still holding a sphere, as if ``j`` had never been in."""
     ix, iy = _clamped_column_index(geom, igeom, x, y)
     col = column_lookup(igeom, hkeys, hval, ix, iy)
-    iz = max(int(math.floor(z / geom[6])), 0)
+    iz = max(int(math.floor(z / geom[GEOM_CELL])), 0)
     before = -1
     k = head[iz, col]
     while k != j:
@@ -288,9 +304,9 @@ def grid_remove(geom, igeom, head, col_top, nxt, hkeys, hval, j, x, y, z):
 def _clamped_column_index(geom, igeom, x, y):
     """Integer column of a centre; in a box, round-off at its faces is kept in the outer columns."""
     ix, iy = _column_index(geom, x, y)
-    if igeom[0] != LATERAL_NONE:
-        ix = min(max(ix, 0), igeom[1] - 1)
-        iy = min(max(iy, 0), igeom[2] - 1)
+    if igeom[IGEOM_MODE] != LATERAL_NONE:
+        ix = min(max(ix, 0), igeom[IGEOM_COLUMNS_X] - 1)
+        iy = min(max(iy, 0), igeom[IGEOM_COLUMNS_Y] - 1)
     return ix, iy
 
 
@@ -302,7 +318,7 @@ def _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, x, y, z):
     col = column_lookup(igeom, hkeys, hval, ix, iy)
     if col < 0:
         col, head, col_top, hkeys, hval = _new_column(igeom, head, col_top, hkeys, hval, counts, ix, iy)
-    iz = int(math.floor(z / geom[6]))
+    iz = int(math.floor(z / geom[GEOM_CELL]))
     if iz < 0:
         iz = 0
     if iz >= head.shape[0]:
@@ -324,8 +340,8 @@ def top_near(geom, igeom, head, col_top, nxt, hkeys, hval, centre, x, y, reach):
     cut into columns.  The layers are scanned from the highest top of the columns within reach
     down, each over all those columns, to the first that holds a centre within reach."""
     ix0, ix1, iy0, iy1 = column_range(geom, igeom, x - reach, x + reach, y - reach, y + reach)
-    periodic = igeom[0] == LATERAL_PERIODIC
-    length_x, length_y = geom[2], geom[3]
+    periodic = igeom[IGEOM_MODE] == LATERAL_PERIODIC
+    length_x, length_y = geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y]
     highest = -1
     for iy in range(iy0, iy1 + 1):
         for ix in range(ix0, ix1 + 1):
@@ -342,7 +358,7 @@ def top_near(geom, igeom, head, col_top, nxt, hkeys, hval, centre, x, y, reach):
                 while j >= 0:
                     dx, dy = periodic_image(periodic, length_x, length_y, centre[j, 0] - x, centre[j, 1] - y)
                     if dx * dx + dy * dy < reach * reach:
-                        return (iz + 1.5) * geom[6]
+                        return (iz + 1.5) * geom[GEOM_CELL]
                     j = nxt[j]
     return 0.0
 
@@ -351,14 +367,14 @@ def top_near(geom, igeom, head, col_top, nxt, hkeys, hval, centre, x, y, reach):
 def column_within(geom, igeom, hkeys, hval, x, y, reach, ix, iy):
     """The column ``(ix, iy)`` if it exists and part of it lies within lateral distance ``reach``
     of ``(x, y)``, else -1."""
-    gap_x, gap_y = periodic_image(igeom[0] == LATERAL_PERIODIC, geom[2], geom[3], x - geom[0] - (ix + 0.5) * geom[4],
-                                  y - geom[1] - (iy + 0.5) * geom[5])
-    gap_x = max(abs(gap_x) - 0.5 * geom[4], 0.0)
-    gap_y = max(abs(gap_y) - 0.5 * geom[5], 0.0)
+    gap_x, gap_y = periodic_image(igeom[IGEOM_MODE] == LATERAL_PERIODIC, geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y], x - geom[GEOM_LOWER_X] - (ix + 0.5) * geom[GEOM_COLUMN_X],
+                                  y - geom[GEOM_LOWER_Y] - (iy + 0.5) * geom[GEOM_COLUMN_Y])
+    gap_x = max(abs(gap_x) - 0.5 * geom[GEOM_COLUMN_X], 0.0)
+    gap_y = max(abs(gap_y) - 0.5 * geom[GEOM_COLUMN_Y], 0.0)
     if gap_x * gap_x + gap_y * gap_y >= reach * reach:
         return -1
-    if igeom[0] == LATERAL_PERIODIC:  # column_lookup's arithmetic, here without a call
-        return _wrapped(ix, igeom[1]) + igeom[1] * _wrapped(iy, igeom[2])
+    if igeom[IGEOM_MODE] == LATERAL_PERIODIC:  # column_lookup's arithmetic, here without a call
+        return _wrapped(ix, igeom[IGEOM_COLUMNS_X]) + igeom[IGEOM_COLUMNS_X] * _wrapped(iy, igeom[IGEOM_COLUMNS_Y])
     return column_lookup(igeom, hkeys, hval, ix, iy)
 
 
@@ -369,21 +385,21 @@ def column_range(geom, igeom, x0, x1, y0, y1):
     A periodic range as wide as the box is cut to one period (each column once); a walled
     box clips it to the existing columns.  Returns ``(ix0, ix1, iy0, iy1)``.
     """
-    mode = igeom[0]
+    mode = igeom[IGEOM_MODE]
     ix0, iy0 = _column_index(geom, x0, y0)
     ix1, iy1 = _column_index(geom, x1, y1)
     if mode == LATERAL_PERIODIC:
-        if ix1 - ix0 + 1 >= igeom[1]:
+        if ix1 - ix0 + 1 >= igeom[IGEOM_COLUMNS_X]:
             ix0 = 0
-            ix1 = igeom[1] - 1
-        if iy1 - iy0 + 1 >= igeom[2]:
+            ix1 = igeom[IGEOM_COLUMNS_X] - 1
+        if iy1 - iy0 + 1 >= igeom[IGEOM_COLUMNS_Y]:
             iy0 = 0
-            iy1 = igeom[2] - 1
+            iy1 = igeom[IGEOM_COLUMNS_Y] - 1
     elif mode == LATERAL_WALLS:
         ix0 = max(ix0, 0)
         iy0 = max(iy0, 0)
-        ix1 = min(ix1, igeom[1] - 1)
-        iy1 = min(iy1, igeom[2] - 1)
+        ix1 = min(ix1, igeom[IGEOM_COLUMNS_X] - 1)
+        iy1 = min(iy1, igeom[IGEOM_COLUMNS_Y] - 1)
     return ix0, ix1, iy0, iy1
 
 
@@ -397,16 +413,16 @@ def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z
     minimum images.
     """
     ix0, ix1, iy0, iy1 = column_range(geom, igeom, x0, x1, y0, y1)
-    iz0 = int(math.floor(z0 / geom[6]))
+    iz0 = int(math.floor(z0 / geom[GEOM_CELL]))
     if iz0 < 0:
         iz0 = 0
-    iz1 = int(math.floor(z1 / geom[6]))
+    iz1 = int(math.floor(z1 / geom[GEOM_CELL]))
     cap = buf.shape[0]
     n = 0
-    periodic = igeom[0] == LATERAL_PERIODIC
-    ncx = igeom[1]
+    periodic = igeom[IGEOM_MODE] == LATERAL_PERIODIC
+    ncx = igeom[IGEOM_COLUMNS_X]
     # periodic columns wrap by counting rather than by a division per column (the same columns)
-    wy = iy0 % igeom[2] if periodic else 0
+    wy = iy0 % igeom[IGEOM_COLUMNS_Y] if periodic else 0
     for iy in range(iy0, iy1 + 1):
         wx = ix0 % ncx if periodic else 0
         for ix in range(ix0, ix1 + 1):
@@ -430,7 +446,7 @@ def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z
                     n += 1
                     j = nxt[j]
         if periodic:
-            wy = wy + 1 if wy + 1 < igeom[2] else 0
+            wy = wy + 1 if wy + 1 < igeom[IGEOM_COLUMNS_Y] else 0
     return n
 
 

@@ -6,6 +6,7 @@ import math
 import numpy as np
 
 from parsim.core.jit import jit
+from parsim.core.sdbd.constants import GEOM_CELL, GEOM_LENGTH_X, GEOM_LOWER_X, IGEOM_SIDES
 from parsim.core.sdbd.bundles import grid_arrays
 from parsim.core.sdbd.grid import grid_collect_growing, min_image
 from parsim.core.sdbd.polygon import candidate_sides, side_gap_in_box
@@ -24,7 +25,7 @@ def max_overlap(n, particle, sediment, grid, lateral_walls, buf):
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
     worst = -np.inf
     for i in range(n):
-        reach = rad[i] + 0.5 * geom[6]
+        reach = rad[i] + 0.5 * geom[GEOM_CELL]
         cnt, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval,
                                         pos[i, 0] - reach, pos[i, 0] + reach, pos[i, 1] - reach,
                                         pos[i, 1] + reach, pos[i, 2] - reach, pos[i, 2] + reach, buf)
@@ -38,7 +39,7 @@ def max_overlap(n, particle, sediment, grid, lateral_walls, buf):
         ov = rad[i] - pos[i, 2]
         if ov > worst:
             worst = ov
-        n_sides = igeom[3]
+        n_sides = igeom[IGEOM_SIDES]
         if lateral_walls and n_sides > 0:
             x = pos[i, 0]
             y = pos[i, 1]
@@ -49,10 +50,10 @@ def max_overlap(n, particle, sediment, grid, lateral_walls, buf):
                     worst = ov
         elif lateral_walls:
             for k in range(2):
-                ov = geom[k] + rad[i] - pos[i, k]
+                ov = geom[GEOM_LOWER_X + k] + rad[i] - pos[i, k]
                 if ov > worst:
                     worst = ov
-                ov = pos[i, k] + rad[i] - geom[k] - geom[2 + k]
+                ov = pos[i, k] + rad[i] - geom[GEOM_LOWER_X + k] - geom[GEOM_LENGTH_X + k]
                 if ov > worst:
                     worst = ov
     return worst, buf

@@ -7,7 +7,7 @@ centres follow as ``centre_i = com + R body_i``.
 import math
 
 from parsim.core.jit import jit
-from parsim.core.sdbd.constants import DROP_MARGIN
+from parsim.core.sdbd.constants import DROP_MARGIN, GEOM_CELL
 from parsim.core.sdbd.grid import top_near
 from parsim.core.sdbd.reads import note
 from parsim.core.sdbd.rotation import (
@@ -72,7 +72,7 @@ def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, pa
     com[0] = particle_drop_xy[p, 0]
     com[1] = particle_drop_xy[p, 1]
     geom = grid.geom
-    reach = extent + 0.5 * geom[6]
+    reach = extent + 0.5 * geom[GEOM_CELL]
     top = given_top
     if math.isnan(top):
         top = top_near(geom, grid.igeom, grid.head, grid.col_top, grid.nxt, grid.hkeys, grid.hval, sediment.centre,

@@ -13,7 +13,7 @@ polygon shrunk by ``r``, whose vertices are at ``R - r / cos(pi / n) <= R - r`` 
 
 The grid's ``geom`` carries the polygon after the grid's own entries (``geom[GEOM_CONTAINER:]``,
 written by :func:`polygon_geometry`): ``cx, cy, h``, then ``u_k`` and ``d_k`` of every side;
-``igeom[3]`` holds ``n`` (0: the box).
+``igeom[IGEOM_SIDES]`` holds ``n`` (0: the box).
 
 A sphere whose reach (its radius and a tolerance) does not get it within the apothem of the
 axis touches no side; otherwise only the sides whose normal points within the angular reach of
@@ -26,6 +26,7 @@ import math
 import numpy as np
 
 from parsim.core.jit import jit
+from parsim.core.sdbd.constants import GEOM_CONTAINER
 
 __all__ = [
     "GEOM_CONTAINER",
@@ -36,8 +37,6 @@ __all__ = [
     "side_gap_in_box",
 ]
 
-#: First entry of the container in the grid's ``geom`` (after the grid's seven).
-GEOM_CONTAINER = 7
 _CX = 0
 _CY = 1
 _APOTHEM = 2

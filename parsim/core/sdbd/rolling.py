@@ -50,6 +50,13 @@ from parsim.core.sdbd.constants import (
     EV_RELEASE,
     EV_TRIAL,
     EV_VIRTUAL,
+    GEOM_CELL,
+    GEOM_LENGTH_X,
+    GEOM_LENGTH_Y,
+    GEOM_LOWER_X,
+    GEOM_LOWER_Y,
+    IGEOM_MODE,
+    IGEOM_SIDES,
     K_FLOOR_CONTACT,
     K_FRUSTRATED,
     K_HANGING_ONE,
@@ -161,7 +168,7 @@ def _end_of_arc(n, particle, axis, pivot, ell, geom, igeom, window):
     ``SIMULTANEOUS_TOL`` of arc length on the sphere farthest from the axis; a chunk is
     ``CHUNK_CELLS`` grid cells of arc on that sphere, and in a periodic box less than
     :func:`_periodic_arc`."""
-    cell = geom[6]
+    cell = geom[GEOM_CELL]
     pos = particle.centre
     phi_hang, c_hang, s_hang = hang_cos_sin(particle.com, pivot, axis)
     rho_max = 0.0
@@ -178,7 +185,7 @@ def _end_of_arc(n, particle, axis, pivot, ell, geom, igeom, window):
         rho_max = ell
     tol_phi = SIMULTANEOUS_TOL * ell / rho_max
     arc = CHUNK_CELLS * cell
-    if igeom[0] == LATERAL_PERIODIC:
+    if igeom[IGEOM_MODE] == LATERAL_PERIODIC:
         arc = min(arc, _periodic_arc(geom))
     phi_lim = arc / rho_max
     if phi_lim > math.pi:
@@ -200,8 +207,8 @@ def _periodic_arc(geom):
     sweeps, grown on each side by the sphere's radius and half a cell (together at most a cell),
     stays narrower than the box's shorter side, so that it holds at most one image of each
     obstacle.  Positive: the box is wider than four times the largest radius, two cells."""
-    side = min(geom[2], geom[3])
-    return (side - 2.0 * geom[6]) * (1.0 - 1e-9)
+    side = min(geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y])
+    return (side - 2.0 * geom[GEOM_CELL]) * (1.0 - 1e-9)
 
 
 @jit(inline="always")
@@ -304,11 +311,11 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
     sed_r = sediment.radius
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
     walls = settings.walls
-    n_sides = igeom[3]
-    reach_sed = 0.5 * geom[6]  # bounds every sediment radius
-    periodic = igeom[0] == LATERAL_PERIODIC
-    length_x = geom[2]
-    length_y = geom[3]
+    n_sides = igeom[IGEOM_SIDES]
+    reach_sed = 0.5 * geom[GEOM_CELL]  # bounds every sediment radius
+    periodic = igeom[IGEOM_MODE] == LATERAL_PERIODIC
+    length_x = geom[GEOM_LENGTH_X]
+    length_y = geom[GEOM_LENGTH_Y]
     pivots = work.pivots
     released = work.released
     scratch = work.scratch
@@ -370,13 +377,13 @@ def _new_contact_events(n, particle, n_pivots, n_dr, work, axis, pivot, sediment
                 ob = OB_WALL_XLO + wdir
                 c0 = plane_of(ob, -1, ri, geom, nrm)
                 if wdir == 0:
-                    near = o0 + xlo - ri - geom[0]
+                    near = o0 + xlo - ri - geom[GEOM_LOWER_X]
                 elif wdir == 1:
-                    near = geom[0] + geom[2] - (o0 + xhi + ri)
+                    near = geom[GEOM_LOWER_X] + geom[GEOM_LENGTH_X] - (o0 + xhi + ri)
                 elif wdir == 2:
-                    near = o1 + ylo - ri - geom[1]
+                    near = o1 + ylo - ri - geom[GEOM_LOWER_Y]
                 else:
-                    near = geom[1] + geom[3] - (o1 + yhi + ri)
+                    near = geom[GEOM_LOWER_Y] + geom[GEOM_LENGTH_Y] - (o1 + yhi + ri)
                 if near > TOUCH_TOL * ell:
                     continue
                 if find_contact(n_pivots, pivots, i, ob, -1) >= 0:

@@ -30,6 +30,7 @@ import numpy as np
 from parsim.core import kernel_mpi
 from parsim.core.growth import with_rows_filled
 from parsim.core.jit import jit
+from parsim.core.sdbd.constants import GEOM_CELL
 from parsim.core.sdbd.blocks import (FAIL_CONFLICT, FAIL_REGION, FINAL, N_FAILURES, drop_top, first_changed,
                                      first_failure, insert_committed, interval_meets, new_scratch, rows_with_centre_in,
                                      settle_rows, withdraw)
@@ -171,7 +172,7 @@ def _settle_span(local, first_row, last_row, particles, settings, rows, plan, ta
     given_top = math.nan
     if last_row == first_row + 1:
         cell = _cell_after(plan, rows.index[first_row])
-        if cell > local.grid.geom[6]:
+        if cell > local.grid.geom[GEOM_CELL]:
             offsets, radii, start, shape, scale, rotation, drop_xy = particles
             given_top = drop_top(first_row, offsets, radii, start, shape, scale, rotation, drop_xy,
                                  grid_arrays(local.grid), local.centre, local.radius, settings[6], plan.n_max)
@@ -216,7 +217,7 @@ def _jitter(plan, now):
 def _set_cell(local, cell):
     """The grid rebuilt with cell ``cell`` if it has another, its spheres (the slots of radius > 0)
     inserted in increasing key: every list as the serial run's."""
-    if local.grid.geom[6] != cell:
+    if local.grid.geom[GEOM_CELL] != cell:
         used = np.flatnonzero(local.radius > 0.0)
         regrid(local.grid, cell, local.centre, used[np.argsort(local.key[used], kind="mergesort")])
 
