@@ -145,27 +145,58 @@ def run_tasks(
     """
     require_thread_multiple(comm)
     describe_failure = describe_failure or _traceback_message
-    finished_lock = threading.Lock()
-
     if comm.Get_size() == 1:
-        for k in range(n_tasks):
-            if time_limit is not None and not time_limit.may_start(k):
-                break
-            try:
-                work(k)
-            except Exception as error:  # noqa: BLE001 - raised with the task's description
-                raise TaskFailed(describe_failure(k, error)) from error
-            if time_limit is not None:
-                time_limit.task_finished(k)
-            if on_finished is not None:
-                on_finished(k, 0)
+        _run_alone(n_tasks, work, on_finished, describe_failure, time_limit)
         return
-
     sched = comm.Dup()  # private tags: the scheduler never sees other messages
     report = FailureReport(sched)
-    counter = _TaskCounter(n_tasks, sched.Get_size(), time_limit)
+    chunks = _Chunks(work, on_finished, describe_failure, time_limit, report, comm.Get_rank(),
+                     _TaskCounter(n_tasks, sched.Get_size(), time_limit))
+    try:
+        if sched.Get_rank() == 0:
+            server = threading.Thread(target=_serve, args=(sched, chunks.counter, chunks.finished, report),
+                                      daemon=True)
+            server.start()
+            while (chunk := chunks.counter.take()) is not None:
+                chunks.finished(chunks.run(*chunk), 0)
+            server.join()
+        else:
+            done = None
+            while True:
+                sched.send(done, dest=0, tag=REQUEST_TAG)
+                chunk = sched.recv(source=0, tag=REPLY_TAG)
+                if chunk is None:
+                    break
+                done = chunks.run(*chunk)
+    finally:
+        report.free()
+        sched.Free()
 
-    def run_chunk(first: int, count: int, budget: float | None) -> tuple[int, int, float]:
+
+def _run_alone(n_tasks, work, on_finished, describe_failure, time_limit) -> None:
+    """:func:`run_tasks` on one rank: the tasks in order, while the time limit allows; a failure raises."""
+    for k in range(n_tasks):
+        if time_limit is not None and not time_limit.may_start(k):
+            break
+        try:
+            work(k)
+        except Exception as error:  # noqa: BLE001 - raised with the task's description
+            raise TaskFailed(describe_failure(k, error)) from error
+        if time_limit is not None:
+            time_limit.task_finished(k)
+        if on_finished is not None:
+            on_finished(k, 0)
+
+
+class _Chunks:
+    """How a rank of :func:`run_tasks` runs a chunk of consecutive tasks, and how rank 0 records one done."""
+
+    def __init__(self, work, on_finished, describe_failure, time_limit, report, rank, counter):
+        self.work, self.on_finished, self.describe_failure = work, on_finished, describe_failure
+        self.time_limit, self.report, self.rank, self.counter = time_limit, report, rank, counter
+        self.finished_lock = threading.Lock()
+
+    def run(self, first: int, count: int, budget: float | None) -> tuple[int, int, float]:
         """Run the chunk's tasks in order; with a ``budget``, start one only while a task as long as the
         chunk's longest so far would end within it (the others are left undone).  Returns (first, tasks
         done, seconds)."""
@@ -176,41 +207,22 @@ def run_tasks(
             if budget is not None and k > first and began - start + longest > budget:
                 return first, k - first, began - start
             try:
-                work(k)
+                self.work(k)
             except Exception as error:  # noqa: BLE001 - every failure must end the job with its message
-                report.fail(f"{describe_failure(k, error)} (on rank {comm.Get_rank()})")
+                self.report.fail(f"{self.describe_failure(k, error)} (on rank {self.rank})")
             longest = max(longest, time.perf_counter() - began)
         return first, count, time.perf_counter() - start
 
-    def finished(chunk: tuple[int, int, float], rank: int) -> None:
+    def finished(self, chunk: tuple[int, int, float], rank: int) -> None:
         """Rank 0, either thread: the first ``count`` tasks of the chunk have finished on ``rank``."""
         first, count, seconds = chunk
-        counter.timed(count, seconds)
-        if time_limit is not None:
-            time_limit.task_finished(first)
-        if on_finished is not None:
-            with finished_lock:
+        self.counter.timed(count, seconds)
+        if self.time_limit is not None:
+            self.time_limit.task_finished(first)
+        if self.on_finished is not None:
+            with self.finished_lock:
                 for k in range(first, first + count):
-                    on_finished(k, rank)
-
-    try:
-        if sched.Get_rank() == 0:
-            server = threading.Thread(target=_serve, args=(sched, counter, finished, report), daemon=True)
-            server.start()
-            while (chunk := counter.take()) is not None:
-                finished(run_chunk(*chunk), 0)
-            server.join()
-        else:
-            done = None
-            while True:
-                sched.send(done, dest=0, tag=REQUEST_TAG)
-                chunk = sched.recv(source=0, tag=REPLY_TAG)
-                if chunk is None:
-                    break
-                done = run_chunk(*chunk)
-    finally:
-        report.free()
-        sched.Free()
+                    self.on_finished(k, rank)
 
 
 def require_thread_multiple(comm: MPI.Comm) -> None:
