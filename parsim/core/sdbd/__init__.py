@@ -326,10 +326,12 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     reads_out = np.zeros((P if record_reads else 0, reads.N_READS))
     with _reporting(progress, diag, engine.D_SETTLED):
         stopped_at, n_written = engine.run_deposition(
-            *prep.kernel_inputs(), prep.substrate_positions, prep.substrate_radii, *g, *prep.kernel_settings(),
-            bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle), sediment_centre,
-            sediment_radius, out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag,
-            counts, reads_out)
+            engine.Drops(*prep.kernel_inputs()), engine.Spheres(prep.substrate_positions, prep.substrate_radii), g,
+            engine.RunOptions(*prep.kernel_settings()),
+            engine.Diagnosis(bool(check_overlaps), int(trace_particle), trace, int(clock_from_particle)),
+            engine.Spheres(sediment_centre, sediment_radius),
+            engine.Outputs(out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag,
+                           counts, reads_out))
     n_done = P if stopped_at < 0 else int(stopped_at)
     return DepositionResult(
         positions=sediment_centre[n_sub:n_sub + n_written],

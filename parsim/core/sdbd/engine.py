@@ -47,6 +47,7 @@ events, the sediment and its grid, and the run's settings.
 
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 from numba import types
@@ -107,28 +108,85 @@ D_SETTLED = 4          # particles settled so far, written as the run goes (read
 N_DIAGNOSTICS = 5
 
 
+class Drops(NamedTuple):
+    """The particles of a run in drop order, as :func:`run_deposition` takes them: the shapes' sphere
+    ``shape_offsets`` (S, 3) and ``shape_radii`` (S,), shape ``k``'s spheres from ``shape_start[k]`` to
+    ``shape_start[k + 1]``; each particle's shape, size factor, orientation quaternion and drop point."""
+
+    shape_offsets: np.ndarray
+    shape_radii: np.ndarray
+    shape_start: np.ndarray
+    particle_shape: np.ndarray
+    particle_scale: np.ndarray
+    particle_rotation: np.ndarray
+    particle_drop_xy: np.ndarray
+
+
+class Spheres(NamedTuple):
+    """Sphere ``centre`` (m, 3) and ``radius`` (m,) arrays."""
+
+    centre: np.ndarray
+    radius: np.ndarray
+
+
+class RunOptions(NamedTuple):
+    """The run's settings: floor and wall-contact modes, the trial angle (4.1), cycle detection (4.2), the
+    step limit per particle and the length scale ``ell`` of the tolerances."""
+
+    floor_mode: int
+    wall_contact: int
+    trial_angle: float
+    cycle_n: int
+    cycle_eps: float
+    max_events: int
+    ell: float
+
+
+class Diagnosis(NamedTuple):
+    """What a run checks and records for tests: overlaps after every move (``debug``), the steps of
+    ``trace_particle`` in ``trace`` (T, 16), the clock from particle ``clock_from`` on."""
+
+    debug: bool
+    trace_particle: int
+    trace: np.ndarray
+    clock_from: int
+
+
+class Outputs(NamedTuple):
+    """The run's preallocated outputs: each sphere's particle; each particle's centre of mass, rotation,
+    contacts, state, event counts and steps; ``diag`` (N_DIAGNOSTICS,), the counters' ``tallies`` and the
+    rectangles each descent read (``reads``, P x 4, or no rows)."""
+
+    particle: np.ndarray
+    com: np.ndarray
+    rotation: np.ndarray
+    contacts: np.ndarray
+    state: np.ndarray
+    events: np.ndarray
+    steps: np.ndarray
+    diag: np.ndarray
+    tallies: np.ndarray
+    reads: np.ndarray
+
+
 @jit
-def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                   particle_rotation, particle_drop_xy, substrate_centre, substrate_radius,
-                   geom, igeom, head, col_top, nxt, hkeys, hval, counts,
-                   floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell,
-                   debug, trace_particle, trace, clock_from, sediment_centre, sediment_radius,
-                   out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag, tallies,
-                   reads_out):
-    """Deposit all particles; returns ``(stopped_at, n_spheres_written)``.
+def run_deposition(drops, substrate, grid_state, options, diagnosis, sediment_spheres, outputs):
+    """Deposit all particles of ``drops`` (:class:`Drops`); returns ``(stopped_at, n_spheres_written)``.
 
     Inputs are validated by :func:`parsim.core.sdbd.deposit`.  The ``m`` spheres of the
-    substrate (``substrate_centre`` (m, 3), ``substrate_radius`` (m,)) are sediment spheres
-    ``0 .. m - 1`` before the first particle; the particles' spheres follow them.
-    ``geom, igeom, head, ...`` is an empty grid from :func:`grid.grid_new` (for
+    ``substrate`` (:class:`Spheres`: ``substrate_centre`` (m, 3), ``substrate_radius`` (m,)) are
+    sediment spheres ``0 .. m - 1`` before the first particle; the particles' spheres follow them.
+    ``grid_state``, the arrays ``geom, igeom, head, ...``, is an empty grid from :func:`grid.grid_new` (for
     ``len(sediment_radius)`` spheres) whose cell is at least the first particle's and the
     substrate's largest sphere diameter; it grows with the largest sphere so far
     (:func:`_fit_grid`), so that nothing of a particle's descent depends on the particles
-    after it.  ``sediment_centre`` (m + n, 3) and ``sediment_radius`` (m + n,) hold the
+    after it.  ``sediment_spheres`` (``sediment_centre`` (m + n, 3), ``sediment_radius`` (m + n,)) hold the
     sediment during the run and its spheres at the end: rows ``m`` on are the particles'
     spheres in the lab frame (a periodic box holds each centre of mass wrapped into it and the
     spheres about it, a sphere beyond the box included), so that the sediment is not kept
-    twice.  ``out_*`` are preallocated outputs for all particles (a :class:`.bundles.Record`);
+    twice.  ``outputs`` (:class:`Outputs`: ``out_*``, ``diag``, ``tallies``, ``reads_out``) are
+    preallocated for all particles (``out_*`` a :class:`.bundles.Record`); ``options`` is a
+    :class:`RunOptions`, ``diagnosis`` a :class:`Diagnosis`;
     ``diag`` (N_DIAGNOSTICS,) receives diagnostics
     (largest overlap after a move when ``debug``, number of steps, number of chunk steps), and
     ``diag[D_SETTLED]`` the particles settled so far, as the run goes.
@@ -142,6 +200,14 @@ def run_deposition(shape_offsets, shape_radii, shape_start, particle_shape, part
     ``reads_out`` (P, 4) the rectangle each particle's descent read (:mod:`.reads`; no rows: none
     is recorded).
     """
+    (shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation,
+     particle_drop_xy) = drops
+    substrate_centre, substrate_radius = substrate
+    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
+    floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell = options
+    debug, trace_particle, trace, clock_from = diagnosis
+    sediment_centre, sediment_radius = sediment_spheres
+    out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag, tallies, reads_out = outputs
     n_part = particle_shape.shape[0]
     n_max = 1
     for s in range(shape_start.shape[0] - 1):
