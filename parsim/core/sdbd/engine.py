@@ -204,20 +204,13 @@ def run_deposition(drops, substrate, grid_state, options, diagnosis, sediment_sp
      particle_drop_xy) = drops
     substrate_centre, substrate_radius = substrate
     geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
-    floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell = options
+    ell = options.ell
     debug, trace_particle, trace, clock_from = diagnosis
     sediment_centre, sediment_radius = sediment_spheres
     out_particle, out_com, out_rot, out_contacts, out_state, out_events, out_steps, diag, tallies, reads_out = outputs
     n_part = particle_shape.shape[0]
-    n_max = 1
-    for s in range(shape_start.shape[0] - 1):
-        n_max = max(n_max, shape_start[s + 1] - shape_start[s])
     n_sub = substrate_radius.shape[0]
-    # eq. 31: the virtual small rotation is the trial angle of 4.1 (the paper refers to
-    # section 4.1 for it); VIRTUAL_ANGLE only when the trial test is disabled
-    virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
-    settings = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
-                        igeom[IGEOM_MODE] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, debug)
+    settings = _settings(options, igeom, debug)
     grid = new_grid(geom, igeom, head, col_top, nxt, hkeys, hval, counts)
     # the caller keeps the outputs alive: the record borrows them
     record = Record(borrowed(out_particle), borrowed(out_com), borrowed(out_rot), borrowed(out_contacts),
@@ -227,7 +220,7 @@ def run_deposition(drops, substrate, grid_state, options, diagnosis, sediment_sp
     beyond_index = np.empty(16, dtype=np.int64)
     beyond_centre = np.empty((16, 3))
     n_beyond = np.int64(0)
-    particle = new_particle(n_max)
+    particle = new_particle(_most_spheres(shape_start))
     work = new_workspace(tallies, np.empty(reads.N_READS if reads_out.shape[0] else 0))
     run_started = counters.start(tallies)
     history = new_descent_history()
@@ -263,10 +256,7 @@ def run_deposition(drops, substrate, grid_state, options, diagnosis, sediment_sp
             stopped_at = p
             break
         if igeom[IGEOM_MODE] == LATERAL_PERIODIC:
-            cx, cy = wrap_position(grid.geom, grid.igeom, particle.com[0], particle.com[1])
-            particle.com[0] = cx
-            particle.com[1] = cy
-            place_spheres(n, particle)
+            _wrap_into_box(n, particle, grid)
         if debug:
             overlap, buf = max_overlap(n, particle, sediment, grid, settings.walls, buf)
             worst_overlap = max(worst_overlap, overlap)
@@ -286,6 +276,35 @@ def run_deposition(drops, substrate, grid_state, options, diagnosis, sediment_sp
     if 0 <= clock_from < n_part:
         diag[D_CLOCKED_SECONDS] = _wall_clock() - clock_start
     return stopped_at, n_sed - n_sub
+
+
+@jit
+def _settings(options, igeom, debug):
+    """The run's :class:`.bundles.Settings` from its :class:`RunOptions`: eq. 31's virtual small rotation
+    is the trial angle of 4.1 (the paper refers to section 4.1 for it), ``VIRTUAL_ANGLE`` only when the
+    trial test is disabled."""
+    floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell = options
+    virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
+    return Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
+                    igeom[IGEOM_MODE] == LATERAL_WALLS, wall_contact == WALL_FRICTIONLESS, debug)
+
+
+@jit
+def _most_spheres(shape_start):
+    """The most spheres of any shape (at least 1)."""
+    n_max = 1
+    for s in range(shape_start.shape[0] - 1):
+        n_max = max(n_max, shape_start[s + 1] - shape_start[s])
+    return n_max
+
+
+@jit
+def _wrap_into_box(n, particle, grid):
+    """Wrap a resting particle's centre of mass into the periodic box, its ``n`` spheres about it."""
+    cx, cy = wrap_position(grid.geom, grid.igeom, particle.com[0], particle.com[1])
+    particle.com[0] = cx
+    particle.com[1] = cy
+    place_spheres(n, particle)
 
 
 @jit  # not inlined: numba's inlining of this large function doubled the first compilation
