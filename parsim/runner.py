@@ -204,9 +204,8 @@ def task_attributes(job: Job, task: Task) -> dict:
             "task": task.label, "realization": task.realization}
 
 
-#: Said when the warm-up compiles a kernel.  Measured with benchmarks/compile.py on 2 cores of an AMD
-#: EPYC: the quick start 9-15 s, a time-stepping aggregation 22 s, the first deposition 50-55 s;
-#: loading from the cache 0.1-1 s.
+#: Said when the warm-up compiles a kernel; the times it gives are those of docs/benchmarks.md,
+#: "Compilation of the kernels".
 PREPARING_KERNELS = ("parsim: preparing the kernels (compiled once per installation and processor model: 10-30 s "
                      "for an aggregation, about a minute for a deposition on one core of an AMD EPYC; loaded from "
                      "the cache in about a second afterwards)...")
@@ -227,11 +226,10 @@ def warm_up(job: Job, pending: list[Task], announce: bool, comm: MPI.Comm | None
     load the kernels from the cache the first one has just filled, instead of every rank
     compiling the same kernels at once.  The ranks of a node share its disk and, normally, the
     cache folder; nodes need not (a home directory local to each node, or another processor
-    model, which has a cache folder of its own), so each node compiles once.  On the quick
-    start with 2 ranks on 2 busy cores this took the warm-up's CPU time from 19 s to 11 s, its
-    peak memory from 0.75 to 0.62 GiB and its wall time from 17.7 to 14.5 s; where each rank has
-    a free core it costs the others' loading, 0.5-1 s.  Rank 0 announces the kernels ready once
-    every rank has them.
+    model, which has a cache folder of its own), so each node compiles once, with less CPU time
+    and memory than every rank compiling at once; where each rank has a free core, the turns cost
+    the others' loading, about a second.  Rank 0 announces the kernels ready once every rank has
+    them.
     """
     solver = job.solver
     rehearsals = {}

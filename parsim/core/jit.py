@@ -16,14 +16,13 @@ GIL release and the floating-point model are decided here once:
 site: it is kept for small functions on the paths of every event, where a call through numba's
 calling convention cost up to 25 % of a deposition's time.  Functions called once per particle
 in the serial deposition, and the event window's compaction, are plain calls: inlined, they
-made the first deposition's compilation 8 s longer (66.6 s against 58.6 s on one core of an AMD
-EPYC, 2026-12) for no measurable speed.
+make the first deposition's compilation some 8 s longer for no measurable speed.
 
 While numba compiles a kernel of :mod:`parsim.core`, Python's cyclic garbage collector runs
 less often (:class:`CompilationCollector`): numba's compiler keeps millions of Python objects
-alive, and the collector's passes over them took 28 % of the CPU time of the first deposition's
-compilation, most of it in full passes.  The process's own thresholds are back in place when
-the compilation ends.
+alive, and the collector's passes over them, most of them full passes, would take over a quarter
+of the CPU time of the first deposition's compilation.  The process's own thresholds are back in
+place when the compilation ends.
 """
 
 import gc
@@ -41,12 +40,10 @@ JIT_OPTIONS = {"cache": True, "nogil": True, "fastmath": False}
 #: The collector's thresholds while a kernel compiles (Python's defaults: 700, 10, 10).  A young
 #: collection every 100 000 allocations and a middle one every 100 of those let the compiler's
 #: short-lived reference cycles die before they reach the oldest generation, whose full passes
-#: are what cost; threshold 1000 makes those passes rare.  Measured on the first deposition on 2
-#: shared cores of an AMD EPYC: CPU time 86 s -> 70-76 s and peak memory 3.0 GiB either way
-#: (``benchmarks/compile.py``); the collector's own time (``gc.callbacks``) 24.5 s -> 8.8 s.
-#: Young thresholds of 10 000 or 20 000 let the cycles reach the oldest generation (peak 3.8-4.1
-#: GiB), 300 000 or 1 000 000 saved no more time for 0.1-0.4 GiB more, no collection at all took
-#: 1.3 GiB more.
+#: are what cost; threshold 1000 makes those passes rare, at the same peak memory.  Young
+#: thresholds of 10 000 or 20 000 let the cycles reach the oldest generation (a third more peak
+#: memory), larger ones than 100 000 save no more time for more memory, and no collection at all
+#: costs over a GiB more.
 COMPILATION_GC_THRESHOLD = (100_000, 100, 1000)
 
 

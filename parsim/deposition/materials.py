@@ -326,7 +326,7 @@ def _built_shape(shape, size, spacing, semi_axes, exponents, n_spheres, agglomer
 
 
 def _build_seconds(shape: str, spheres: int | None, mesh_file: str) -> float:
-    """Estimated time to build a particle (measured on one core of an AMD EPYC, 2026)."""
+    """Estimated time to build a particle on one core (the constants above)."""
     if shape in SECONDS_PER_SMOOTH_SPHERE:
         return SECONDS_PER_SMOOTH_SPHERE[shape] * spheres
     if shape == "mesh":

@@ -105,7 +105,7 @@ def default_halo(prep, largest_scale, largest_cell) -> float:
     up to ``largest_scale`` and a grid's cell that grows to ``largest_cell``: four columns and twice the
     largest particle extent, 5 diameters for spheres, wider than what nearly every particle's descent
     reads beyond its drop point in a box (a heap's particles roll farther; their owners fetch what they
-    miss).  On 2 ranks it was the fastest of 3 to 9 diameters (docs/benchmarks.md)."""
+    miss).  On 2 ranks it is the fastest of halos 3 to 9 diameters wide."""
     extent = 0.0
     for s in range(len(prep.shape_start) - 1):
         a, b = prep.shape_start[s], prep.shape_start[s + 1]
@@ -121,9 +121,8 @@ def default_window(layout, prep, cell) -> int:
     blocks and ``D`` its depth, in grid columns; ``K`` blocks); a longer window only settles particles
     that will be settled again.  The window, in drop order, is REFERENCE_WINDOW scaled so, per rank the
     nearest power of two between SMALLEST_WINDOW and LARGEST_WINDOW: 512 in a box of 300 x 300 sphere
-    diameters on 2 ranks, 32 on 16.  Measured (docs/benchmarks.md): blocks 18.75 diameters wide, as on
-    16 ranks in that box, settle 3.4 % of their particles twice with 128 drop indices per rank, 1.5 %
-    with 64 and 0.84 % with 32, for 88, 56 and 39 us per round outside settling."""
+    diameters on 2 ranks, 32 on 16.  docs/benchmarks.md gives the particles settled twice and the time
+    per round of several windows in blocks as wide as those of 16 ranks in that box."""
     depth = float(prep.box_upper_xy[1] - prep.box_lower_xy[1]) if prep.lateral != LATERAL_NONE \
         else layout.length  # a heap: about as deep as its drop area is wide
     width, depth = layout.length / cell / REFERENCE_SIDE, max(depth / cell / REFERENCE_SIDE, 0.0)
@@ -514,7 +513,7 @@ class _RankRun:
         """Compile, or load from the cache, the kernels that neither a small task nor one rank alone may call,
         for the types of this run's arguments, without running them: the neighbours' regions (several blocks)
         and a fetch (:meth:`_fetch_and_settle`; another rank's particles, :meth:`_insert`).  A task that met
-        them first compiled them inside its wall time (settle_again 20 s, insert_parcel 7 s on 2 busy cores)."""
+        them first would compile them inside its wall time (tens of seconds)."""
         nothing = np.zeros(0, dtype=np.int64)
         _compile_for(blocks.interval_meets, 0.0, 0.0, 0.0, 0.0, self.layout.length, self.periodic)
         _compile_for(blocks.interval_within, 0.0, 0.0, 0.0, 0.0, self.length[0], self.periodic)

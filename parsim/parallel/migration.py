@@ -46,9 +46,9 @@ def migrate(decomposition: Decomposition, global_id, arrays: dict, owner=None) -
     sorted by global id, with the dtypes they came with.  Collective; on one rank the inputs
     come back sorted and nothing is communicated, and when no record leaves any rank (one
     reduction tells) the sorted inputs themselves come back (the stepper then keeps what it
-    built on its rows).  Only the records that leave are packed and
-    sent: with 500 000 records per rank on 2 ranks, a few thousand leaving (N = 10^6 after a
-    free flight), a migration takes 45-50 ms instead of 75-90 ms sending them all, to itself too.
+    built on its rows).  Only the records that leave are packed and sent: after a free flight a
+    few thousand of 500 000 records per rank leave (N = 10^6 on 2 ranks), and packing every
+    record, those a rank would send itself too, takes some 70 % longer.
     """
     global_id, arrays = _checked_records(decomposition, global_id, arrays)
     if decomposition.size == 1:
@@ -101,8 +101,8 @@ def _sorted_by_id(global_id: np.ndarray, arrays: dict) -> tuple[np.ndarray, dict
 
 
 def _rows(values: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """``values[rows]`` along the first axis: ``np.take`` copies 125 000 rows of two floats in
-    0.24 ms, indexing in 1.1 ms."""
+    """``values[rows]`` along the first axis: ``np.take`` copies rows about four times faster than
+    indexing."""
     return np.take(values, rows, axis=0)
 
 

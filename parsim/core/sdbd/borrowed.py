@@ -2,9 +2,8 @@
 
 numba counts the references to every array it manages: reading an array out of a bundle
 (:mod:`.bundles`) takes a reference and drops it again, an atomic increment and decrement of
-the array's count.  The kernel did that about 230 times per decide-and-move step of a sphere,
-and the atomic operations took 40 % of its time (one core of an AMD EPYC, 2026-11-27:
-55 000 spheres/s, 95 000 with the same counting made non-atomic).
+the array's count.  The kernel would do that about 230 times per decide-and-move step of a
+sphere, and the atomic operations would take some 40 % of its time.
 
 A borrowed view is the same array without its memory-info pointer: numba's reference counting
 returns at once on it, with no atomic operation.  It does not keep its memory alive, so every

@@ -101,7 +101,7 @@ from parsim.core.sdbd.ties import earliest_event, push_event
 __all__ = ["roll"]
 
 
-@jit  # not inlined into the descent: that took 12 s and 1.2 GiB more to compile, for no speed
+@jit  # not inlined into the descent: that adds some 12 s and a GiB to the compilation, for no speed
 def roll(n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_counts, buf):
     """Rotate the particle of ``n`` spheres on contact ``k`` (``MOTION_SINGLE``) or on
     contacts ``k`` and ``m`` (``MOTION_PAIR``) about the axis of the decision up to the

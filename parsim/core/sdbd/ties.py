@@ -20,8 +20,8 @@ def push_event(n_t, best, tol, phi, c, s, ev, i, ob, j, sh0, sh1, window):
 
     Inlined at each of its dozen call sites, it holds only the test most candidates fail and
     the append; the compaction of the window after a new earliest event is a call
-    (:func:`_keep_within`): inlined as well, it made the first deposition's compilation about
-    4 s longer (66.6 s against 62.5 s on one core of an AMD EPYC), for no measurable speed."""
+    (:func:`_keep_within`): inlined as well, it makes the first deposition's compilation about
+    4 s longer, for no measurable speed."""
     if phi > best + tol:
         return n_t, best
     if phi < best:

@@ -34,8 +34,8 @@ def check_discs_or_spheres(positions):
 @jit
 def _distance_sq(A, a, B, b):
     """``|A_a - B_b|^2`` in d = 2 or 3, written out, the sum in the order of a loop over the
-    components: with that loop over the runtime d, DAHA's multiplier update over all pairs took
-    twice as long (20.9 against 10.6 ns per sphere update, N = 102 400)."""
+    components: with that loop over the runtime d, DAHA's multiplier update over all pairs takes
+    twice as long."""
     dx, dy = A[a, 0] - B[b, 0], A[a, 1] - B[b, 1]
     if A.shape[1] == 2:
         return dx * dx + dy * dy
@@ -49,7 +49,7 @@ def _sorted_by_cell(X, side, k):
     rows of cell ``c`` being ``order[first[c]:first[c + 1]]``.
 
     32-bit indices: the counting writes at random into ``first``, which at 4 cells per sphere
-    outgrows the core's cache in 64 bits (102 400 spheres: 2.1 ms instead of 4.6 ms)."""
+    outgrows the core's cache in 64 bits (at 10^5 spheres the sort then takes twice as long)."""
     n = X.shape[0]
     first = np.zeros(k ** X.shape[1] + 1, dtype=np.int32)
     cell_of = np.empty(n, dtype=np.int32)
@@ -82,9 +82,9 @@ def _near_pairs(X, R, queries, group, reach, side, k):
     The grid (``k`` cells per side of length ``side >= 2 max R + reach``) covers the points.
     The rows are copied cell by cell, so that the spheres a search examines lie next to each
     other in memory: in row order, which the motion of the clusters scrambles, a search over
-    102 400 scattered spheres took 45 ms instead of 22 ms.  When at least half the rows are
-    queries the cells are swept, each pair of rows examined once (8 ms instead of 15 ms for
-    that search); otherwise each query examines the block of cells around its own.
+    10^5 scattered spheres takes twice as long.  When at least half the rows are queries the
+    cells are swept, each pair of rows examined once (about half the time of a search from each
+    query); otherwise each query examines the block of cells around its own.
     """
     n, d = X.shape
     order, first, cell_of = _sorted_by_cell(X, side, k)
@@ -200,9 +200,8 @@ def cross_cluster_pairs(X, R, cluster, queries, reach, side, k):
 
     The grid (``k`` cells per side of length ``side >= 2 max R + reach``) covers the box.
     With queries in less than half the rows, only the rows near them are sorted
-    (:func:`_pairs_near`): in a late stage at N = 102 400, where the watch is renewed from
-    fewer than 100 spheres outside the largest cluster 2 486 times, the run took 59.5 s
-    instead of 62.3 s.
+    (:func:`_pairs_near`): a late stage renews its watch thousands of times from fewer than a
+    hundred spheres outside the largest cluster, and would sort every row each time.
     """
     if _mostly_queries(queries, X.shape[0]):
         return _near_pairs(X, R, queries, cluster, reach, side, k)
@@ -251,8 +250,8 @@ def unlinked_contacts(X, R, moved, side, k, global_id, link_head, link_next, lin
     2 max R``) covers the box.
 
     Only the rows near the moved ones are sorted, into cells over their bounding box: after a
-    minimisation of a few clusters that is a small part of the box (at N = 102 400 the search
-    over the whole box cost 11 ms a round, 6.5 ms over the near rows in the whole box's cells)."""
+    minimisation of a few clusters that is a small part of the box, and a round costs what those
+    rows hold, not a pass over every row."""
     touching = _pairs_near(X, R, moved, np.arange(X.shape[0]), 0.0, side, k)
     return _unlinked(touching, global_id, link_head, link_next, link_to)
 
@@ -370,8 +369,8 @@ def _pairs_of(P, R, queries, n_moving, reach):
 
 def _sorted_moving_pairs(pairs, n_moving):
     """The rows ``(i, j)`` of ``pairs`` (each pair once) as ``a = min < b = max`` with ``a`` moving,
-    sorted by ``(a, b)``: by the one key ``a (max b + 1) + b``, which sorts 150 000 pairs in
-    2 ms, where ``np.lexsort`` on ``(a, b)`` took 24 ms."""
+    sorted by ``(a, b)``: by the one key ``a (max b + 1) + b``, about ten times faster than
+    ``np.lexsort`` on ``(a, b)``."""
     a, b = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
     keep = a < n_moving
     a, b = a[keep], b[keep]

@@ -35,39 +35,35 @@ Stability.  Linearising (3.15)–(3.16) about a linked pair at contact (distance
 ``x''' + c x'' + 8 gamma lambda s^2 x' + 8 alpha beta s^2 x = 0``, stable (Routh–Hurwitz)
 only if ``c gamma lambda > alpha beta``.  For a pair held by its own link
 (``lambda = 1/2``) the values of eq. 4.1 (c = 1.3, gamma = 0.3, alpha = 0.3, beta = 3)
-violate it (0.2 < 0.9): linked pairs then bounce about contact for ever and, as we
-measured, DAHA does not meet (3.27) on clumps of 20 discs or more.  Contacts that carry
-less load (smaller ``lambda``) need a larger ``c gamma``: with ``gamma = 10`` a few
-contacts of clumps of thousands of discs kept bouncing with overlaps ``o_ij`` up to 0.2
-(found by the deepest-overlap test below, hidden by the mean of (3.28)).  Our defaults
-keep delta, alpha, eps_c and eps_s of (4.1) and take ``c = 3``, ``gamma = 30`` and
-``beta = 10``, constant, which converges on every case we ran.
+violate it (0.2 < 0.9): linked pairs then bounce about contact for ever, and DAHA does
+not meet (3.27) on clumps of 20 discs or more.  Contacts that carry less load (smaller
+``lambda``) need a larger ``c gamma``: with ``gamma = 10`` a few contacts of clumps of thousands
+of discs kept bouncing with overlaps ``o_ij`` up to 0.2 (found by the deepest-overlap test
+below, hidden by the mean of (3.28)).  Our defaults keep delta, alpha, eps_c and eps_s of
+(4.1) and take ``c = 3``, ``gamma = 30`` and ``beta = 10``, constant, which converges on every
+case we ran.
 
 The multiplier rate.  ``phi_ij`` is quadratic in the overlap: a pair at ``o_ij = 0.05`` has
 ``phi_ij = 2.5e-3``, and with ``beta = 3`` its multiplier grows by ``delta beta phi_ij ~ 1e-3``
 per iteration.  Shallow overlaps are then pushed out slowly, and their spheres, which do not
-sleep while deeper than ``eps_c`` (below), stay awake: in the first minimisation of a step at
-N = 102 400, V_f = 0.1 (44 987 moving spheres) 20 000 pairs were still deeper than ``eps_c``
-after 200 iterations, and 38 000 spheres awake.  The dynamic rate of (3.29) multiplies
-``beta_bar`` by ``sqrt(n) / phi_A``, over 10^3 in such a minimisation.  Our constant rate is
-``beta = 10``: that minimisation then has 7 650 pairs deeper than ``eps_c`` and 8 750 spheres
-awake at iteration 200, needs 6.6 instead of 11.1 million sphere updates, and ends at a mean
-overlap of 0.0045 instead of 0.0084.  Whole runs take 15-40 % less time, and the TS-vs-ED table
-is unchanged within its spread (measured 2026-11-22: benchmarks/aggregation_ts.py at N = 1600
-... 102 400, V_f 0.1-0.3; the TS-vs-ED job's e(D_f) at most 1.9 % against 1.8 % at beta = 3,
-mean 0.6 % for both).  A faster rate gains little
-more and stops too early: at ``beta = 30`` two overlapping discs overshoot contact, and the
-iteration stops at a turning point of their oscillation, where for a moment every step is below
-``eps_s``, with a gap of 0.005 (0.0006 at ``beta = 10``).  The Routh–Hurwitz bound asks
+sleep while deeper than ``eps_c`` (below), stay awake: in the first minimisation of a large
+step most moving spheres are still awake after 200 iterations.  The dynamic rate of (3.29)
+multiplies ``beta_bar`` by ``sqrt(n) / phi_A``, over 10^3 in such a minimisation.  Our constant
+rate is ``beta = 10``: such a minimisation then has about a quarter as many spheres awake at
+iteration 200, needs about 40 % fewer sphere updates and ends at about half the mean overlap;
+whole runs are shorter, and the TS-vs-ED statistics are unchanged within their spread.  A faster
+rate gains little more and stops too early: at ``beta = 30`` two overlapping discs overshoot
+contact, and the iteration stops at a turning point of their oscillation, where for a moment
+every step is below ``eps_s``, with a gap of 0.005 (0.0006 at ``beta = 10``).  The Routh–Hurwitz bound asks
 ``lambda > alpha beta / (c gamma) = 0.033``.
 
 Stiff spheres (ours).  The kick is explicit: it is stable only while ``delta^2 K_i`` stays
 below a few, with ``K_i`` the stiffness of sphere ``i``, estimated as
 ``sum_j 2 lambda_ij (|alpha + gamma phi_ij| + 2 gamma |X_i - X_j|^2)`` over its active
 constraints plus ``alpha`` per attracting link.  Multipliers grow in long minimisations of
-jammed clumps: at N = 10^5 a disc with nine links oscillated with growing amplitude and was
-thrown 130 R away in one kick.  A sphere with ``delta^2 K_i > STIFFNESS_LIMIT`` therefore
-has its kick scaled by ``STIFFNESS_LIMIT / (delta^2 K_i)``, a diagonal preconditioning that
+jammed clumps, and a sphere with many links can then oscillate with growing amplitude until
+one kick throws it a hundred radii away.  A sphere with ``delta^2 K_i > STIFFNESS_LIMIT``
+therefore has its kick scaled by ``STIFFNESS_LIMIT / (delta^2 K_i)``, a diagonal preconditioning that
 leaves the fixed points, and every sphere below the bound, unchanged.
 
 Dynamic parameters (3.29), with ``dynamic = True``:
@@ -81,7 +77,7 @@ times the bound ``c gamma / (2 alpha)`` of its spheres.  The divisions are guard
 ``phi_A`` below ``OVERLAP_FLOOR eps_c`` counts as "no overlap".  The law still gives a sphere
 deep in an overlap, once the mean overlap ``phi_A`` is small, ``delta c_i`` far above 1; clipped
 at 1, (3.22) erased its velocity in every iteration and it never moved: every run at N >= 400
-failed in its first steps, with "last step 0" and a deepest overlap of 0.13-0.4.  Clipped at
+failed in its first steps, with a deep overlap left.  Clipped at
 ``MAX_DAMPING`` (0.9) it keeps a tenth of its velocity; clumps of 200 discs then converge and
 those runs reach one cluster.  With constant parameters ``delta c`` is 0.45 and the clip does
 nothing.  One caveat remains: the fast multipliers of (3.29) make two overlapping discs
@@ -93,8 +89,7 @@ iteration and the mean overlap over the links, ``sum o_ij / #S``, is at most ``e
 We add that the deepest overlap, ``max o_ij`` over the candidate pairs, is at most
 ``eps_max``: the mean is diluted by the settled links of a large cluster, and in the
 first iterations, which start at rest, every step is below ``eps_s``; without the
-bound one deep overlap among a thousand settled links passes (3.28), as it did in our
-runs.
+bound one deep overlap among a thousand settled links passes (3.28).
 
 Stopping tile by tile (ours, after section 3.3).  Once the mean overlap (3.28) holds over
 the whole minimisation, (3.27) and the deepest-overlap bound are applied to each inner
@@ -106,32 +101,26 @@ neighbours push into it reopens, and all reopen if the mean rises above ``eps_c`
 minimisation stops when every tile is settled (with one tile: the global tests).  Judged
 as a whole, a large minimisation waits for the last of the spheres that creep around a
 neighbour under a stretched link, somewhere among all its tiles; the more spheres, the
-longer.  A replayed minimisation of 791 530 spheres (N = 10^6, step 2) stops after 849
-iterations in 80 s instead of 3505 in 216 s, one of 84 409 spheres (N = 102 400) after 657
-in 6.8 s instead of 1905 in 15.7 s.  The mean overlap left is then close to ``eps_c``
-(0.009 against 0.002): the paper's tolerance; ``sqrt(phi) = 0.009`` is a penetration
-``phi / (4 R)`` of 5e-4 R at R = 0.2.  Applying (3.28) tile by tile as well does not work:
-a small tile jammed against its anchors can hold a mean above ``eps_c`` for ever (a later
-round of 199 spheres in 34 tiles at N = 6400 ran 100 000 iterations).  The tiles need not be
-the inner rectangles: the stepper stops on cells four diameters wide, or on the inner
-rectangles where those are finer (:func:`parsim.core.ts.tiles.stopping_cells_per_side`).  In
-the first steps of a run at N = 102 400, V_f = 0.1, minimisations of 40 000 spheres have inner
-rectangles of some 270 spheres each; on the cells, settled regions rest sooner, and the run
-takes 37 s instead of 49 s, with the same TS-vs-ED statistics (measured 2026-11-22: 37.4 s
-against 48.6 s, seed 1; the TS-vs-ED job's e(D_f) at most 1.8 %, mean 0.6 %).
+longer.  Judged tile by tile, a minimisation of 10^5 or 10^6 spheres stops after a few times
+fewer iterations.  The mean overlap left is then close to ``eps_c`` (about 0.009, where the
+test of the whole minimisation leaves about 0.002): the paper's tolerance; ``sqrt(phi) = 0.009``
+is a penetration ``phi / (4 R)`` of 5e-4 R at R = 0.2.  Applying (3.28) tile by tile as well does
+not work: a small tile jammed against its anchors can hold a mean above ``eps_c`` for ever.  The
+tiles need not be the inner rectangles: the stepper stops on cells four diameters wide, or on the
+inner rectangles where those are finer (:func:`parsim.core.ts.tiles.stopping_cells_per_side`).
+The inner rectangles of a large first-step minimisation hold some hundreds of spheres each; on
+the cells, settled regions rest sooner, with the same TS-vs-ED statistics.
 
 Jammed tiles.  Settled neighbours can also jam a tile: a sphere pressed by settled spheres
 (each pair at most ``eps_max``) into an anchor (deeper than ``eps_max``) has nowhere to go,
-and its tile stays steady and too deep for ever.  At N = 10^6 (step 6, 667 160 spheres) one
-such sphere, at 0.103 against an anchor with three settled partners at 0.08, held a
-minimisation for 4600 of its 5393 iterations; a later round in fine tiles failed after
-10 000.  A tile found steady but too deep at ``JAMMED_CHECKS`` checks in a row is *jammed*,
-and a tile with a moving sphere that overlaps a moving sphere of a jammed tile does not
-settle, so the spheres pressing on the jam can give way.  Those two minimisations replayed
-stop after 689 and 609 iterations; the two above are unchanged (849 and 657), as a tile
-that is still moving, or has been deep only for a moment, holds nothing open.  A sphere caged by
-anchors, which never move, stays caged whatever the iterations: the stepper then gives up and
-solves the minimisation again in one tile, without anchors (:mod:`parsim.core.ts.stepper`).
+and its tile stays steady and too deep for ever: one such sphere can hold a minimisation of
+most of 10^6 spheres open for thousands of iterations.  A tile found steady but too deep at
+``JAMMED_CHECKS`` checks in a row is *jammed*, and a tile with a moving sphere that overlaps a
+moving sphere of a jammed tile does not settle, so the spheres pressing on the jam can give way.
+A tile that is still moving, or has been deep only for a moment, holds nothing open, so a
+minimisation without a jam stops after the same iterations.  A sphere caged by anchors, which
+never move, stays caged whatever the iterations: the stepper then gives up and solves the
+minimisation again in one tile, without anchors (:mod:`parsim.core.ts.stepper`).
 
 Initial multipliers.  Eq. 3.26 sets ``lambda_ij = lambda max(0, phi_ij)``.  A link that
 took part in the previous minimisation ended it at a critical point of (3.8) with its
@@ -139,26 +128,24 @@ multiplier; restarting it from ``max(0, phi_ij) ~ 0`` releases every settled con
 the interacting clusters, which must all relax again.  :func:`minimise` therefore takes
 the multipliers to start from; the stepper passes each link's last value when
 ``carry_multipliers`` is set (the default), and pairs without one start from (3.26).
-At N = 6400 this needs ten times fewer sphere-iterations (docs/benchmarks.md).
+This needs about ten times fewer sphere updates.
 
 Sleeping spheres (ours; ``sleep_tolerance = 0`` gives the plain Jacobi iteration above).
 In a large minimisation most spheres settle within a few hundred iterations while a few
-contacts elsewhere take a thousand more (at N = 25600, V_f = 0.3, 85 % of the sphere
-updates of the costliest minimisation moved their sphere less than 1e-5).  Every
-``FULL_SWEEP_EVERY`` iterations all spheres are updated and the stopping conditions are
-tested; after such a sweep a sphere that moved at most ``sleep_tolerance`` and overlaps no
-partner by more than ``eps_c`` sleeps: it is put at rest and skipped, and so are the
-multipliers of pairs of two sleeping spheres, until a partner moves more than
-``sleep_tolerance`` (it then wakes in the next iteration) or the next full sweep.  Spheres
-in deeper overlaps never sleep: their multipliers are what drives (3.28) down, and freezing
-them made a clump converge eight times slower.  A configuration where nothing moves is a
-fixed point of both iterations, the stopping conditions are tested on full sweeps only (but
-see polishing below), and every decision is local to a sphere and its partners, so the
-iteration still splits among tiles and ranks.  While more than half the moving spheres are
-awake (the first hundred or so iterations of a large minimisation, three quarters of its
-sphere updates), the multipliers are updated and the wake-ups spread pair by pair rather
-than sphere by sphere: the same pairs and spheres, 13-15 % less time on replayed
-first-step minimisations at N = 102 400.
+contacts elsewhere take a thousand more (most sphere updates of a large minimisation move
+their sphere less than 1e-5).  Every ``FULL_SWEEP_EVERY`` iterations all spheres are updated
+and the stopping conditions are tested; after such a sweep a sphere that moved at most
+``sleep_tolerance`` and overlaps no partner by more than ``eps_c`` sleeps: it is put at rest
+and skipped, and so are the multipliers of pairs of two sleeping spheres, until a partner
+moves more than ``sleep_tolerance`` (it then wakes in the next iteration) or the next full
+sweep.  Spheres in deeper overlaps never sleep: their multipliers are what drives (3.28)
+down, and freezing them made a clump converge eight times slower.  A configuration where
+nothing moves is a fixed point of both iterations, the stopping conditions are tested on full
+sweeps only (but see polishing below), and every decision is local to a sphere and its
+partners, so the iteration still splits among tiles and ranks.  While more than half the
+moving spheres are awake (the first hundred or so iterations of a large minimisation, three
+quarters of its sphere updates), the multipliers are updated and the wake-ups spread pair by
+pair rather than sphere by sphere: the same pairs and spheres, in less time.
 
 Polishing (ours, with sleeping spheres).  Once a full sweep finds (3.27) and (3.28) met, the
 paper would stop; only our deepest-overlap bound may still fail.  From then on the full
@@ -167,20 +154,18 @@ above, the spheres that are awake, but wake no sleeping one, and test the stoppi
 on the current positions (the constraint values of sleeping pairs have not changed).  A
 sleeping sphere wakes only when a partner moves.  The full sweeps kept waking the spheres
 that creep at about 1e-4 per iteration under stretched links; they made new short-lived deep
-overlaps elsewhere, and in a minimisation of 84 000 spheres 187 different pairs passed
-``eps_max`` in turn.  That minimisation now stops after 3601 iterations instead of 6913, in
-the same CPU time as if the pairs deeper than ``eps_c`` were left to sleep too (1969
-iterations, but 5 times more pairs above ``eps_c`` at the end; docs/benchmarks.md).
+overlaps elsewhere, with different pairs passing ``eps_max`` in turn, and a large minimisation
+ran about twice as many iterations.  Letting the pairs deeper than ``eps_c`` sleep too would
+stop sooner for the same CPU time, but leave several times more pairs above ``eps_c``.
 Polishing ends, and the full sweeps resume, if the mean overlap rises above ``eps_c``.
 
 Attraction range (3.30).  The indicator ``H_W(|X_i - X_j| <= Delta_W)`` is taken once per
 minimisation, at the positions it starts from (``X^{n,q-1}`` of (3.1)); the links that
 attract then attract until it ends.  Taken at every iterate, the pull of a link jumps between
 ``alpha Delta_W`` and 0 as its length crosses ``Delta_W``, and spheres on such links chatter
-across it: in the first minimisation of step 2 at N = 10^6 (791 530 moving spheres) about a
-hundred of them, different ones at each check, moved 3e-3 to 5e-3 per iteration, above
-``eps_s``, and it took 10 913 iterations (360 s); with the indicator fixed it takes 3505
-(215 s).  The paper's notation allows both readings: (3.30) writes the indicator at
+across it: in a large minimisation about a hundred of them, different ones at each check, move
+more than ``eps_s`` per iteration, and it runs about three times as many iterations as with the
+indicator fixed.  The paper's notation allows both readings: (3.30) writes the indicator at
 ``X^{n,q}``, as it writes the variable of (3.5).
 
 Iterations in one call.  The iterations run in one jitted call, :func:`_iterations`, which
@@ -188,9 +173,8 @@ exchanges the ghost rows and reduces the drift from inside (:mod:`parsim.core.ke
 returns to Python only for what Python does (:class:`_Minimisation`): after a check iteration
 (every ``FULL_SWEEP_EVERY``-th with sleeping spheres, every one without), for the stopping tests,
 settled tiles and sleeping spheres; and before an iteration whose pairs must be searched again.
-The operations are those of the former loop in Python, in the same order: one process gives the
-same result bit for bit, without leaving numba at every iteration (at N = 10^5 those round trips
-were 40 % of a time step).  Each iteration sends each neighbour one message, after (3.23): the
+In between it does not leave numba, whose round trips at every iteration would take a large
+share of a time step.  Each iteration sends each neighbour one message, after (3.23): the
 position, velocity and damping of the awake spheres it holds as ghosts (:func:`_share_motion`),
 the only rows that changed; the receiver marks those ghosts awake, the others asleep, and makes
 the next half drift (3.20) of its ghosts itself, with their owners' velocities (a sphere at rest
@@ -205,8 +189,8 @@ reach from where its pairs were last searched, the pairs of every sphere more th
 cost a search over all pairs: the problem keeps its spheres binned in cells where their pairs
 were last searched, and a refresh rebins and searches the moved spheres, then merges the
 pair lists once, carrying each pair's multiplier and constraint value.  In the first hundred
-iterations of a large minimisation it runs every second iteration for 1-2 % of the spheres;
-at N = 10^6 it takes 46 ms instead of 106 ms with a sort of every sphere into cells.
+iterations of a large minimisation it runs every second iteration for a few percent of the
+spheres, at about half the cost of a sort of every sphere into cells.
 """
 
 import math
@@ -328,7 +312,7 @@ def _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_
     Written for d = 2 and 3 with the components in local variables, and the partner of each
     listed pair read from ``pair_partner``: the same sums in the same order as loops over the
     components with the force in an array and the partner found from the pair's two ends, in
-    58 instead of 103 ns per sphere update (a replayed minimisation at N = 102 400)."""
+    a little over half their time per sphere update."""
     three = P.shape[1] == 3
     for i in awake:
         xi, yi = P[i, 0], P[i, 1]
@@ -529,8 +513,7 @@ def _settle(restless, U, is_awake, first_ghost, link_ptr, link_to, pair_ptr, pai
     """The restless spheres (ghost rows: restless on their owner) and their partners stay
     awake; the others sleep, at rest, with their pairs' multipliers, until a partner moves.
     Returns the awake moving spheres, in order: read off the flags in the pass that stops the
-    others, instead of sorted as they woke (at N = 10^6 the checks of the first two steps spent
-    1.0 s here instead of 1.9 s on one process, 0.47 s instead of 1.2-1.4 s on each of two)."""
+    others, not sorted as they woke (a sort that would about double the checks' time here)."""
     n_moving = U.shape[0]
     for i in range(is_awake.shape[0]):
         is_awake[i] = False

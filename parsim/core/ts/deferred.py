@@ -5,7 +5,7 @@ then makes tens of thousands of quiet stretches and wall reflections (N = 250 00
 22 million time steps, 21 800 reflections).  Each moves every sphere: a quiet stretch and the
 step after it translate all rows (items i of section 3, ``X += duration V``), a reflection
 shifts the whole cluster across the wall (item ii).  Done row by row that is three passes over
-all spheres per reflection, 39 s of that run's 86 s.
+all spheres per reflection, nearly half of that run's time.
 
 Between merges the cluster only translates, and all its spheres carry the same velocity
 (eq. 2.9 gives every sphere of a cluster its momentum / mass; a reflection turns them alike).

@@ -9,7 +9,7 @@ the cluster's reference sphere has moved since the binning.
 
 In a late stage one large cluster holds nearly every sphere, and the watch is renewed from
 the few spheres outside it every hundred steps or so.  A renewal that sorted every sphere
-into cells again cost O(N) each time (about 3.5 ms at N = 102 400); with the large cluster
+into cells again cost O(N) each time; with the large cluster
 binned in its frame it costs what the cells around the few queries hold.  With fewer
 still outside, the stepper follows their straight paths through the frame to the first
 possible contact (:meth:`ClusterFrame.first_contact`) and keeps no watch at all.

@@ -115,8 +115,7 @@ def _pair_links(members, pair_a, pair_b, head, nxt, to):
 def _cross_pairs(pair_a, pair_b, members, moving_ghost):
     """The pairs with a moving ghost end (``pair_a < n_moving <= pair_b`` for these), and whether
     each pair is counted here: all but the cross pairs whose ghost has the lower global id.  Two
-    loops over the pairs in place of five numpy passes (3.5 ms instead of 10 ms for 1.5 million
-    pairs, 10 000 of them cross pairs)."""
+    loops over the pairs, in about a third of the time of five numpy passes over them."""
     counted = np.empty(pair_a.shape[0], dtype=np.bool_)
     n_cross = 0
     for p in range(pair_a.shape[0]):

@@ -4,7 +4,7 @@ warm-up compiles them, or loads them from the cache, before any task is timed.
 They are the refresh of candidate pairs inside a long minimisation (module
 :mod:`~parsim.core.ts.daha`, "Candidate pairs"), which the warm-up's few spheres never drift far
 enough to need, and the pairs with a ghost end, which only a run on several ranks has.  A task
-that met them first compiled them inside its wall time (3-4 s on a busy core).  The arrays have
+that met them first would compile them inside its wall time (a few seconds).  The arrays have
 the dtypes and layouts of the real calls, so the compiled versions are the ones those calls use.
 """
 

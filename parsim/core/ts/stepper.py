@@ -16,8 +16,8 @@ the mean cluster size ``N / M`` (``M`` clusters), ``dt = dt(0) (1 + ln(N / M) / 
 from ``dt(0)`` at the start to ``2 dt(0)`` when a single cluster remains (section 4.1: the
 step grows because collisions become rarer).  The law linear in the merges done,
 ``1 + (N - M) / (N - 1)``, reached 1.8 dt(0) after two or three steps, while nearly every
-sphere still collided in every step; at N = 102400 its first six steps cost three times
-as much (docs/benchmarks.md).
+sphere still collided in every step; at N = 10^5 its first six steps cost three times
+as much.
 
 Quiet steps.  After a time step that made no link, the stepper lists the pairs of clusters
 that can touch soon (a watch, :mod:`parsim.core.ts.quiet`), bounds how many of the next steps
@@ -49,8 +49,8 @@ previous round made (finer tiles than the first round's: :mod:`parsim.core.ts.ti
 the clusters of all the step's links as the interacting ones.
 Everywhere else the previous round has converged and the new links are not felt (the
 attraction reaches ``Delta_W``, less than a tile), so re-solving it would change nothing
-but cost: at N = 102400 a time step took up to 30 rounds of 83 000 moving spheres, each
-for a few tens of new links.  In the non-rigid formulation there is one tile, and every
+but cost: at N = 10^5 a time step can take up to 30 rounds, each of tens of thousands of moving
+spheres for a few tens of new links.  In the non-rigid formulation there is one tile, and every
 round moves every interacting sphere as before.
 
 Processes.  The run holds the rows of the spheres its process owns and reaches the others
@@ -86,9 +86,9 @@ FORMULATIONS = ("almost_rigid", "non_rigid")
 STOP_REASONS = ("single_cluster", "max_time", "max_steps")
 #: Factors of Table 1: dt(0) = factor L / max|V|.
 TABLE1_TIME_STEP_FACTORS = (0.005, 0.01, 0.015)
-#: Cells per sphere, at most, of the grids of the whole-box searches: a contact search over
-#: 102 400 scattered spheres (V_f 0.1) takes 15 ms with 4, 21 ms with 8 (more cells, mostly
-#: empty, to count and visit) and 20 ms with 2 (more spheres per cell to test).
+#: Cells per sphere, at most, of the grids of the whole-box searches: over 10^5 scattered spheres
+#: (V_f 0.1) a contact search is fastest with 4, and some 40 % slower with 8 (more cells, mostly
+#: empty, to count and visit) or with 2 (more spheres per cell to test).
 CONTACT_CELLS_PER_SPHERE = 4
 #: Gap (in mean radii) below which two interacting spheres get a constraint multiplier.
 CANDIDATE_REACH = 1.0
@@ -117,8 +117,8 @@ QUIET_HORIZON_STEPS = (8, 1024)
 QUIET_PAIRS_PER_SPHERE = 64.0
 #: ... and at most this fraction of the box.  With few spheres outside the largest cluster the
 #: pairs within the horizon cost more than the renewal's sort of every sphere once the horizon
-#: is long: in a late stage of 250 000 steps at N = 102 400 (two small clusters wandering)
-#: the run took 70 s with L/8, 75 s with L/16 and 77 s with L/4; other runs alike.
+#: is long: on long late stages at N = 10^5 (two small clusters wandering) L/8 is faster than
+#: L/16 or L/4, by up to 10 %.
 QUIET_HORIZON_BOX_FRACTION = 1.0 / 8.0
 
 
@@ -379,7 +379,7 @@ class _Run:
     def _with_ghosts(self, width):
         """Owned and ghost rows, to be read, not written: ``(halo, global ids, positions, radii,
         cluster labels)``."""
-        if self.domain.size == 1:  # no ghosts: spare the copies and gathers (0.3 ms at N = 102 400)
+        if self.domain.size == 1:  # no ghosts: spare the copies and gathers of every row
             return None, self.global_id, self.X, self.R, self.own_cluster
         halo = self.domain.ghosts(self.X, self.global_id, width)
         ids = np.concatenate([self.global_id, halo.ghost_global_id])
@@ -459,8 +459,8 @@ class _Run:
             k, side = grid_size(self.L, self.contact + horizon, self.d, self.n, CONTACT_CELLS_PER_SPHERE)
             pairs = cross_cluster_pairs(X, R, cluster, largest.outside, horizon, side, k)
         # every pair has an owned end (a query); a watch needs neither order nor uniqueness, which
-        # _shared_pairs would buy with a sort (29 ms for the 1.4 million pairs of a late-stage
-        # watch at N = 102 400 when the horizon reached L/4)
+        # _shared_pairs would buy with a sort of every pair (over a million in a late-stage watch
+        # with a long horizon)
         if self.domain.size == 1:  # the pairs' rows are known: spare the watch mapping them back (O(N))
             return Watch(ids[pairs], horizon, held=ids, rows=pairs)
         return Watch(self.domain.gather(ids[pairs]), horizon)
@@ -482,8 +482,8 @@ class _Run:
     def _affordable_horizon(self, n_queries):
         """The largest horizon at which the quiet-step search from ``n_queries`` spheres looks at
         about ``QUIET_PAIRS_PER_SPHERE`` pairs per sphere of the run (its ``3^d`` cells of side
-        ``contact + horizon`` hold ``n / L^d`` spheres per unit volume).  Two large clusters
-        searched up to L/4 cost 0.7 s per search at N = 102400, more than all the steps saved."""
+        ``contact + horizon`` hold ``n / L^d`` spheres per unit volume).  A search between two large
+        clusters up to L/4 costs more than all the steps it saves."""
         per_query = QUIET_PAIRS_PER_SPHERE * self.n / max(n_queries, 1)
         block_side = (per_query * self.L**self.d / self.n) ** (1.0 / self.d)
         return max(block_side / 3.0 - self.contact, 0.0)
@@ -712,8 +712,8 @@ class _Run:
 
 def _distinct(values):
     """The distinct ``values`` (1-d integers), sorted, as ``np.unique`` gives them.  ``np.unique``
-    hashes them first since numpy 2.3: 1.3 million link keys, as many as the first two steps at
-    N = 10^6 make, took it 0.57 s, and this sort 14 ms."""
+    hashes them first since numpy 2.3, some forty times slower than this sort on the million link
+    keys of the first two steps at N = 10^6."""
     values = np.sort(values)
     first = np.ones(values.shape[0], dtype=np.bool_)
     first[1:] = values[1:] != values[:-1]

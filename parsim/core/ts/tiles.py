@@ -14,9 +14,8 @@ law ``Mr = (#S / 10^3)^(4/3)`` through those two points, ``k = round(Mr^(1/d))``
 Later rounds of step 2e (ours, see :mod:`parsim.core.ts.stepper`) move only the tiles around
 the few links the previous round made; everywhere else that round has converged.  They use
 tiles ``LATER_ROUND_TILE_WIDTHS`` interaction ranges wide, finer than the law above once
-``#S`` exceeds a few thousand: at N = 102 400, V_f = 0.3 the paper's tiles (about 50 R wide)
-put some 30 000 spheres in a round made for a few hundred new links, and the later rounds took
-14 s of a 74 s run; with tiles 8 R wide they took 4.4 s (docs/benchmarks.md).
+``#S`` exceeds a few thousand: at N = 10^5 the paper's tiles (about 50 R wide) put tens of
+thousands of spheres in a round made for a few hundred new links.
 
 A minimisation stops region by region (ours, :mod:`parsim.core.ts.daha`, "Stopping tile by
 tile"): on square cells ``STOPPING_CELL_DIAMETERS`` largest diameters wide, or on the tiles
