@@ -70,7 +70,7 @@ def test_a_long_deposition_says_how_many_particles_have_settled(monkeypatch, cap
     from parsim.core import sdbd
     from parsim.progress import reporting_settled, settled_lines, settled_reporter
 
-    monkeypatch.setattr(sdbd, "PROGRESS_SECONDS", 0.002)
+    monkeypatch.setattr(sdbd.api, "PROGRESS_SECONDS", 0.002)
     n = 20_000
     rng = np.random.default_rng(1)
     heard = []

@@ -100,7 +100,7 @@ def test_a_sphere_released_against_a_side_onto_a_sphere_slides_down_to_the_floor
 def test_four_sides_facing_the_axes_are_the_walled_box(monkeypatch):
     # the box [0, 8]^2 is the square of apothem 4 about (4, 4); the engine's sides facing
     # +-x and +-y have exact normals, so the walls are the same planes to the last bit
-    monkeypatch.setattr(sdbd, "MIN_CYLINDER_SIDES", 4)
+    monkeypatch.setattr(sdbd.inputs, "MIN_CYLINDER_SIDES", 4)
     half = 4.0
     radius = half / np.cos(np.pi / 4)
     while radius * np.cos(np.pi / 4) != half:
