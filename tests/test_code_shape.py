@@ -46,7 +46,6 @@ WAITING = {
     "parsim/core/shapes/union.py:_column_moments": {'lines'},
     "parsim/core/structure.py:_shell_counts": {'parameters'},
     "parsim/core/structure.py:_touching_in_cells": {'parameters'},
-    "parsim/core/ts/daha.py:_iterations": {'parameters'},
     "parsim/core/ts/daha.py:_kick_damp_drift": {'parameters'},
     "parsim/core/ts/daha.py:_spread": {'parameters'},
     "parsim/core/ts/daha.py:_spread_dense": {'parameters'},

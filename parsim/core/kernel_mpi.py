@@ -15,7 +15,7 @@ mpi4py); until then, and in a process without MPI, to stand-ins that fail (retur
 kernels turn into an error.  A kernel first run in a process without the library keeps the
 stand-ins for that process.
 
-A *halo* tuple describes one rank's ghost exchange: communicator, size, the neighbours' ranks,
+A *halo* (:class:`Halo`) describes one rank's ghost exchange: communicator, size, the neighbours' ranks,
 which owned rows go to each (back to back, delimited by ``send_ptr``), how many ghost rows come
 from each (``recv_ptr``, stored from the first ghost row on), buffers (room for every row with its
 place in the list, and a count per neighbour), request slots (int64) and the bytes of one
@@ -26,6 +26,7 @@ one-process halo: the kernels then make no MPI call at all.
 """
 
 import ctypes
+from typing import NamedTuple
 
 import numpy as np
 from llvmlite import binding as llvm
@@ -114,12 +115,35 @@ def bind_library() -> bool:
 bind_library()
 
 
+class Halo(NamedTuple):
+    """One rank's ghost exchange, as the jitted loops take it (module docstring): the communicator's
+    handle and size, the neighbours' ranks, the owned ``rows`` each gets (delimited by ``send_ptr``),
+    the ghost rows from each (``recv_ptr``), the ``send`` and ``receive`` buffers, the request slots and
+    the bytes of one request, statuses, the handles of MPI_DOUBLE, MPI_MAX and MPI_SUM, and the tally."""
+
+    comm: int
+    size: int
+    neighbours: np.ndarray
+    rows: np.ndarray
+    send_ptr: np.ndarray
+    recv_ptr: np.ndarray
+    send: np.ndarray
+    receive: np.ndarray
+    request_slots: np.ndarray
+    request_bytes: int
+    statuses: np.ndarray
+    double: int
+    maximum: int
+    total: int
+    tally: np.ndarray
+
+
 def no_halo():
     """The halo of a problem held whole by one process: no neighbour, no reduction."""
     empty = np.zeros(0, dtype=np.int64)
-    return (np.int64(0), np.int64(1), np.zeros(0, dtype=np.int32), empty, np.zeros(1, dtype=np.int64),
-            np.zeros(1, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(1, dtype=np.int64), np.int64(8),
-            np.zeros(STATUS_INTS, dtype=np.int32), np.int64(0), np.int64(0), np.int64(0), np.zeros(N_TALLIES))
+    return Halo(np.int64(0), np.int64(1), np.zeros(0, dtype=np.int32), empty, np.zeros(1, dtype=np.int64),
+                np.zeros(1, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(1, dtype=np.int64), np.int64(8),
+                np.zeros(STATUS_INTS, dtype=np.int32), np.int64(0), np.int64(0), np.int64(0), np.zeros(N_TALLIES))
 
 
 @jit(inline="always")
@@ -216,7 +240,7 @@ def _swap(halo, width, counted):
 @jit
 def global_max(value, halo):
     """The largest ``value`` over the ranks of the halo's communicator.  Collective."""
-    if halo[1] == 1:  # one process: nothing to allocate in the iteration loop
+    if halo.size == 1:  # one process: nothing to allocate in the iteration loop
         return value
     return _reduced(np.full(1, value), halo, False)[0]
 
@@ -224,7 +248,7 @@ def global_max(value, halo):
 @jit
 def global_sum(value, halo):
     """The sum of ``value`` over the ranks of the halo's communicator.  Collective."""
-    if halo[1] == 1:
+    if halo.size == 1:
         return value
     return _reduced(np.full(1, value), halo, True)[0]
 

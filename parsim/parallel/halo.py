@@ -81,7 +81,7 @@ class HaloPlan:
             self._buffers[trailing] = self._new_buffers(trailing, np.float64)
         return self._exchange_into(values, *self._buffers[trailing])
 
-    def kernel_halo(self, width: int, tally=None) -> tuple:
+    def kernel_halo(self, width: int, tally=None) -> kernel_mpi.Halo:
         """This plan as a halo of :mod:`parsim.core.kernel_mpi`, for exchanges from jitted loops:
         rows of up to ``width`` floats, each with its place, and a count per neighbour; what they
         send is added to ``tally`` (``N_TALLIES`` floats)."""
@@ -90,12 +90,16 @@ class HaloPlan:
         rows = np.concatenate([np.asarray(r, dtype=np.int64) for r in self.send_indices] + [np.zeros(0, np.int64)])
         n_neighbours = len(self.decomposition.neighbours)
         n_requests = max(2 * n_neighbours, 1)
-        return (_handle(comm), np.int64(comm.Get_size()), np.asarray(self.decomposition.neighbours, dtype=np.int32),
-                rows, _offsets(send_counts), _offsets(self.ghost_counts),
-                np.zeros(len(rows) * (width + 1) + n_neighbours), np.zeros(self.n_ghost * (width + 1) + n_neighbours),
-                np.zeros(n_requests, dtype=np.int64),
-                np.int64(MPI._sizeof(MPI.Request)), np.zeros(n_requests * kernel_mpi.STATUS_INTS, dtype=np.int32), _handle(MPI.DOUBLE), _handle(MPI.MAX),
-                _handle(MPI.SUM), np.zeros(kernel_mpi.N_TALLIES) if tally is None else tally)
+        return kernel_mpi.Halo(
+            comm=_handle(comm), size=np.int64(comm.Get_size()),
+            neighbours=np.asarray(self.decomposition.neighbours, dtype=np.int32), rows=rows,
+            send_ptr=_offsets(send_counts), recv_ptr=_offsets(self.ghost_counts),
+            send=np.zeros(len(rows) * (width + 1) + n_neighbours),
+            receive=np.zeros(self.n_ghost * (width + 1) + n_neighbours),
+            request_slots=np.zeros(n_requests, dtype=np.int64), request_bytes=np.int64(MPI._sizeof(MPI.Request)),
+            statuses=np.zeros(n_requests * kernel_mpi.STATUS_INTS, dtype=np.int32), double=_handle(MPI.DOUBLE),
+            maximum=_handle(MPI.MAX), total=_handle(MPI.SUM),
+            tally=np.zeros(kernel_mpi.N_TALLIES) if tally is None else tally)
 
     def _new_buffers(self, trailing: tuple, dtype) -> tuple[np.ndarray, np.ndarray]:
         """Send buffer (rows for all neighbours, back to back) and receive buffer (the ghosts)."""

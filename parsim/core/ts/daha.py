@@ -195,6 +195,7 @@ spheres, at about half the cost of a sort of every sphere into cells.
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -787,7 +788,7 @@ def _share_motion(P, U, damping_of, previous_ghost, is_awake, awake, ghost_motio
     Their start stays in ``previous_ghost``."""
     ghost_U, motion, changed, sends, arrived = ghost_motion
     first_ghost, d = P.shape[0] - ghost_U.shape[0], P.shape[1]
-    if halo[2].shape[0] == 0:  # no neighbour
+    if halo.neighbours.shape[0] == 0:  # no neighbour
         return 0
     for i in awake:
         if sends[i]:
@@ -843,17 +844,21 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags
     Each iteration: the drift test; on a full sweep every sphere outside settled tiles awake;
     (3.20)-(3.23) for the awake spheres; (3.24) for their pairs; then, between checks, the
     spheres that a moving partner wakes (module docstring, "Sleeping spheres"), and on a check
-    the tests of :func:`_check`."""
+    the tests of :func:`_check`.
+
+    Why so many parameters: besides the named bundles (``state`` a :class:`MinimiserState`,
+    ``adjacency``, ``pairs``, ``coefficients``, ``checks``, ``ghost_motion``, ``halo``), a call takes the
+    progress the previous one returned (iteration, awake and stepped rows, drift, flags, measures)."""
     P, R, U, new, previous, previous_ghost, built_at, lam, phi, sphere_overlap, attracts, damping_of, is_awake, \
         settled, is_anchor = state
     link_ptr, link_to, pair_ptr, pair_of, pair_partner, ghost_ptr, ghost_partner = adjacency
     pair_a, pair_b, cross_pairs = pairs
-    delta, alpha, gamma, c_bar, stable, sleep, stiffness_limit, max_damping = coefficients[:8]
-    multiplier_rate, floor, n_spheres = coefficients[8:]
+    delta, alpha, gamma, c_bar, stable, sleep, stiffness_limit, max_damping, multiplier_rate, floor, n_spheres = \
+        coefficients
     polishing, any_settled = flags
     n_moving = U.shape[0]
     first_ghost = P.shape[0] - previous_ghost.shape[0]
-    ghost_U, arrived = ghost_motion[0], ghost_motion[4]
+    ghost_U, arrived = ghost_motion.ghost_U, ghost_motion.arrived
     while iteration < last:
         guarded = max(measures[1], floor)
         rate = delta * multiplier_rate * (math.sqrt(n_spheres) / guarded if dynamic else 1.0)
@@ -1000,6 +1005,95 @@ def minimise(problem, params, attraction_range=math.inf, exchange=None, on_itera
     return run.outcome(False)
 
 
+class MinimiserState(NamedTuple):
+    """What the iterations read and change: positions ``P`` (moving rows, then anchors and ghosts) and
+    ``R``, velocities ``U``, the trial ``new`` rows, ``previous`` positions (and the ghosts'), where the
+    pairs were searched (``built_at``), multipliers ``lam`` and constraint values ``phi`` per pair, each
+    sphere's overlap, which links attract, each row's damping, and the awake, settled and anchor flags."""
+
+    P: np.ndarray
+    R: np.ndarray
+    U: np.ndarray
+    new: np.ndarray
+    previous: np.ndarray
+    previous_ghost: np.ndarray
+    built_at: np.ndarray
+    lam: np.ndarray
+    phi: np.ndarray
+    sphere_overlap: np.ndarray
+    attracts: np.ndarray
+    damping_of: np.ndarray
+    is_awake: np.ndarray
+    settled: np.ndarray
+    is_anchor: np.ndarray
+
+
+class Adjacency(NamedTuple):
+    """Each moving sphere's links (``link_ptr``, ``link_to``) and pairs (``pair_ptr``, ``pair_of``,
+    ``pair_partner``), and each ghost's pairs (``ghost_ptr``, ``ghost_partner``), in CSR form."""
+
+    link_ptr: np.ndarray
+    link_to: np.ndarray
+    pair_ptr: np.ndarray
+    pair_of: np.ndarray
+    pair_partner: np.ndarray
+    ghost_ptr: np.ndarray
+    ghost_partner: np.ndarray
+
+
+class PairLists(NamedTuple):
+    """The pairs' two rows, and the pairs across the rank's border."""
+
+    pair_a: np.ndarray
+    pair_b: np.ndarray
+    cross_pairs: np.ndarray
+
+
+class Coefficients(NamedTuple):
+    """The scheme's coefficients: delta, alpha, gamma, c_bar of (3.20)-(3.24), the damping where
+    (3.26) is stable, the sleep tolerance, the stiffness and damping limits, beta, the overlap floor
+    of the dynamic rate (3.29) and the number of moving spheres over all ranks."""
+
+    step: float
+    attraction: float
+    penalty: float
+    damping: float
+    stable: float
+    sleep: float
+    stiffness_limit: float
+    max_damping: float
+    multiplier_rate: float
+    floor: float
+    n_spheres: float
+
+
+class Checks(NamedTuple):
+    """What the stopping tests read: each row's tile, the tiles shared with neighbours, each tile's
+    jammed count and flag, the restless rows, which pairs are counted, the tolerances
+    (eps_s, eps_max, eps_c), the number of links and the jammed limit."""
+
+    tile_of: np.ndarray
+    shared_tiles: np.ndarray
+    jammed_checks: np.ndarray
+    in_jammed_tile: np.ndarray
+    restless: np.ndarray
+    pair_counted: np.ndarray
+    tolerances: tuple
+    n_links: float
+    jammed_limit: int
+
+
+class GhostMotion(NamedTuple):
+    """The ghosts' velocities as on their owners, the rows sent and received, the flags of the changed
+    rows, which owned rows some neighbour holds as ghosts, and the ghost rows that arrived."""
+
+    ghost_U: np.ndarray
+    motion: np.ndarray
+    changed: np.ndarray
+    sends: np.ndarray
+    arrived: np.ndarray
+
+
 class _Minimisation:
     """The state of one :func:`minimise` between calls of :func:`_iterations`, and the pair searches
     it returns for."""
@@ -1026,10 +1120,10 @@ class _Minimisation:
         self.halo = exchange.kernel_halo
         n_rows, n_ghost = P.shape[0], P.shape[0] - problem.first_ghost
         sends = np.zeros(n_rows, dtype=np.bool_)
-        sends[self.halo[3]] = True  # the owned rows some neighbour holds as ghosts
+        sends[self.halo.rows] = True  # the owned rows some neighbour holds as ghosts
         # ghost velocities as on their owners, rows sent and received, flags of the changed rows, ghost rows arrived
-        self.ghost_motion = (np.zeros((n_ghost, d)), np.zeros((n_rows, motion_width(d))),
-                             np.zeros(n_rows, dtype=np.bool_), sends, np.empty(n_ghost, dtype=np.int64))
+        self.ghost_motion = GhostMotion(np.zeros((n_ghost, d)), np.zeros((n_rows, motion_width(d))),
+                                        np.zeros(n_rows, dtype=np.bool_), sends, np.empty(n_ghost, dtype=np.int64))
         mean_overlap, typical_overlap = _overlaps(self.phi, problem.pair_counted, problem.link_ptr, problem.pair_ptr,
                                                   problem.pair_of, self.sphere_overlap, self.n_links, self.halo)
         self.measures = (mean_overlap, typical_overlap, math.inf, math.inf)  # and the largest step, deepest overlap
@@ -1064,20 +1158,20 @@ class _Minimisation:
     def iterate(self, last):
         """Iterations up to ``last`` at most (:func:`_iterations`); returns why it stopped."""
         problem, params = self.problem, self.params
-        state = (problem.positions, problem.radii, self.U, self.new, self.previous, self.previous_ghost,
-                 self.built_at, self.lam, self.phi, self.sphere_overlap, self.attracts, self.damping_of,
-                 self.is_awake, self.settled, self.is_anchor)
-        adjacency = (problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of, problem.pair_partner,
-                     problem.ghost_ptr, problem.ghost_partner)
-        coefficients = (params.step, params.attraction, params.penalty, params.damping, self.stable,
-                        params.sleep_tolerance, STIFFNESS_LIMIT, MAX_DAMPING, params.multiplier_rate,
-                        OVERLAP_FLOOR * params.overlap_tolerance, self.n_spheres)
+        state = MinimiserState(problem.positions, problem.radii, self.U, self.new, self.previous,
+                               self.previous_ghost, self.built_at, self.lam, self.phi, self.sphere_overlap,
+                               self.attracts, self.damping_of, self.is_awake, self.settled, self.is_anchor)
+        adjacency = Adjacency(problem.link_ptr, problem.link_to, problem.pair_ptr, problem.pair_of,
+                              problem.pair_partner, problem.ghost_ptr, problem.ghost_partner)
+        coefficients = Coefficients(params.step, params.attraction, params.penalty, params.damping, self.stable,
+                                    params.sleep_tolerance, STIFFNESS_LIMIT, MAX_DAMPING, params.multiplier_rate,
+                                    OVERLAP_FLOOR * params.overlap_tolerance, self.n_spheres)
         tolerances = (params.steadiness_tolerance, params.max_overlap_tolerance, params.overlap_tolerance)
-        checks = (self.tile_of, self.shared_tiles, self.jammed_checks, self.in_jammed_tile, self.restless, problem.pair_counted,
-                  tolerances, self.n_links, JAMMED_CHECKS)
+        checks = Checks(self.tile_of, self.shared_tiles, self.jammed_checks, self.in_jammed_tile, self.restless,
+                        problem.pair_counted, tolerances, self.n_links, JAMMED_CHECKS)
         self.iteration, self.awake, self.stepped, self.drift, why, self.flags, self.measures = _iterations(
             self.iteration, last, state, self.awake, self.stepped, self.drift, REFRESH_DRIFT * problem.reach,
-            self.flags, self.measures, adjacency, (problem.pair_a, problem.pair_b, problem.cross_pairs),
+            self.flags, self.measures, adjacency, PairLists(problem.pair_a, problem.pair_b, problem.cross_pairs),
             coefficients, checks, params.dynamic, self.ghost_motion, self.halo)
         return why
 
