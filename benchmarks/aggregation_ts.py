@@ -32,7 +32,7 @@ import numpy as np
 if __package__ in (None, ""):  # run as a script from a source tree
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), os.pardir))
 
-from parsim.core.aggregation_ed import simulate_ed  # noqa: E402
+from parsim.core.ed import simulate_ed  # noqa: E402
 from parsim.core.initial import (  # noqa: E402
     box_length_for_volume_fraction,
     isotropic_velocities,

@@ -1,11 +1,11 @@
-"""Tests of the event-driven ballistic aggregation solver (parsim.core.aggregation_ed)."""
+"""Tests of the event-driven ballistic aggregation solver (parsim.core.ed)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from parsim.core.aggregation_ed import simulate_ed
+from parsim.core.ed import simulate_ed
 from parsim.core.initial import (
     box_length_for_volume_fraction,
     isotropic_velocities,

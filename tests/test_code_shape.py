@@ -14,9 +14,6 @@ MAX_LINES, MAX_PARAMETERS = 80, 12
 REASONS = {"lines": "Why so long:", "parameters": "Why so many parameters:"}
 
 WAITING = {
-    "parsim/core/aggregation_ed.py:_attach": {'parameters'},
-    "parsim/core/aggregation_ed.py:_predict_cluster": {'parameters'},
-    "parsim/core/aggregation_ed.py:_simulate": {'lines'},
     "parsim/core/sdbd/blocks.py:_freeze_row": {'parameters'},
     "parsim/core/sdbd/blocks.py:_settle": {'parameters'},
     "parsim/core/sdbd/blocks.py:drop_top": {'parameters'},

@@ -5,6 +5,6 @@
 - :mod:`.tiled`: one time-stepping task over the ranks of a task's group
   (``DecomposedDomain``: tiles, ghosts, migration).
 
-The kernels are in :mod:`parsim.core.aggregation_ed`, :mod:`parsim.core.ts` and
+The kernels are in :mod:`parsim.core.ed`, :mod:`parsim.core.ts` and
 :mod:`parsim.core.statistics`.
 """

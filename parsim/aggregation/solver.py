@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from parsim.core.aggregation_ed import simulate_ed
+from parsim.core.ed import simulate_ed
 from parsim.core.initial import (box_length_for_volume_fraction, isotropic_velocities, lattice_positions,
                                  lattice_sites_per_side, lattice_spacing, uniform_cube_velocities)
 from parsim.core.statistics import MIN_FIT_BOX_SIZES, cluster_statistics, fit_box_sizes, pair_distribution_grid

@@ -778,7 +778,7 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
 
     Parameters
     ----------
-    positions, velocities, radii, masses : as for :func:`parsim.core.aggregation_ed.simulate_ed`,
+    positions, velocities, radii, masses : as for :func:`parsim.core.ed.simulate_ed`,
         in d = 2 or 3.
     time_step_factor : float > 0
         ``dt(0) = factor L / max|V|`` (Table 1: 0.005, 0.01, 0.015).
