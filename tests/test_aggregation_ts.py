@@ -9,11 +9,12 @@ import xarray as xr
 
 from parsim.comparison import markdown, method_comparison
 from parsim.core.initial import box_length_for_volume_fraction, isotropic_velocities, lattice_positions
-from parsim.core.ts import DahaParameters, daha, simulate_ts, stepper, tiles
+from parsim.core.ts import DahaParameters, simulate_ts, stepper, tiles
 from parsim.output.dataset import decoded
 from parsim.core.ts.clusters import apply_reflections, free_flight, overruns, reflections, translate
 from parsim.core.ts.contacts import cross_cluster_contacts
-from parsim.core.ts.daha import FULL_SWEEP_EVERY, attraction_energy, minimise
+from parsim.core.ts.daha import attraction_energy, driver, minimise
+from parsim.core.ts.daha.driver import FULL_SWEEP_EVERY
 from parsim.core.ts.links import LinkSet
 from parsim.core.ts.problem import build_problem
 from parsim.core.ts.quiet import Watch
@@ -70,7 +71,7 @@ def test_two_overlapping_discs_are_pushed_apart_to_contact():
 @pytest.mark.parametrize("k", [8, 30, 200])
 def test_a_clump_of_overlapping_discs_converges(k, params):
     """Also with the dynamic damping and multiplier rate of (3.29), which give a disc deep in
-    an overlap a damping delta c_i far above 1 (clipped at daha.MAX_DAMPING)."""
+    an overlap a damping delta c_i far above 1 (clipped at driver.MAX_DAMPING)."""
     rng = np.random.default_rng(k)
     x = 5.0 + rng.uniform(0.0, 0.4 * math.sqrt(k), (k, 2))  # area fraction ~0.8: many overlaps
     gaps = all_gaps(x, np.full(k, R))
@@ -162,13 +163,13 @@ def test_tiles_that_meet_the_stopping_tests_stop_while_others_go_on():
     assert outcome.iterations < minimise(whole, PARAMS).iterations
 
 
-@pytest.mark.parametrize("jammed_checks, converges", [(daha.JAMMED_CHECKS, True), (10**9, False)])
+@pytest.mark.parametrize("jammed_checks, converges", [(driver.JAMMED_CHECKS, True), (10**9, False)])
 def test_a_jammed_tile_holds_open_the_tiles_pressing_on_it(monkeypatch, jammed_checks, converges):
     """A disc between an anchor (overlap 0.11 > eps_max) and three discs of another tile
     (overlaps 0.095) that settle at the first check: a jam, until that tile is held open.
     The mean test (3.28) is set aside (eps_c = 1), as the settled links of a large
     minimisation dilute it; spheres do not sleep, so every iteration is a check."""
-    monkeypatch.setattr(daha, "JAMMED_CHECKS", jammed_checks)
+    monkeypatch.setattr(driver, "JAMMED_CHECKS", jammed_checks)
     x = [[1.0, 1.0]] + [[1.0 + 0.3885 * math.cos(a), 1.0 + 0.3885 * math.sin(a)] for a in (0.0, math.pi / 3,
                                                                                            -math.pi / 3)]
     problem, radii = problem_of(x + [[1.0 - 0.3847, 1.0]], [], moving=[0, 1, 2, 3])
@@ -461,9 +462,9 @@ def test_stiff_contacts_do_not_throw_spheres_away(monkeypatch):
     x = 5.0 + rng.uniform(0.0, 0.22 * math.sqrt(n), (n, 2))
     multipliers = None
     moved = {}
-    limited = daha.STIFFNESS_LIMIT
+    limited = driver.STIFFNESS_LIMIT
     for limit in (math.inf, limited):
-        monkeypatch.setattr(daha, "STIFFNESS_LIMIT", limit)
+        monkeypatch.setattr(driver, "STIFFNESS_LIMIT", limit)
         problem, _ = problem_of(x, touching_links(x))
         if multipliers is None:
             multipliers = np.exp(rng.uniform(0.0, math.log(300.0), problem.pair_a.size))

@@ -140,7 +140,7 @@ class Count(event.Listener):
 event.register("numba:compile", Count())
 x, v, r, m, L = initial_condition(400, 0.3)
 simulate_ts(x, v, r, m, L, time_step_factor=TIME_STEP_FACTOR, domain=DecomposedDomain(MPI.COMM_WORLD, L, 2))
-iterations = ("parsim.core.ts.daha._iterations", "parsim.core.ts.daha._check", "parsim.core.kernel_mpi.")
+iterations = ("parsim.core.ts.daha.driver._iterations", "parsim.core.ts.daha.stopping._check", "parsim.core.kernel_mpi.")
 counts = MPI.COMM_WORLD.gather(sorted(set(name for name in compiled if name.startswith(iterations))))
 if MPI.COMM_WORLD.Get_rank() == 0:
     print(json.dumps(counts))

@@ -7,7 +7,7 @@ from parsim.core.celllist import grid_size
 from parsim.core.ts.contacts import (BinnedRows, candidate_pairs, cross_cluster_pairs, incidence, unlinked_contacts,
                                     updated_candidate_pairs)
 from parsim.core.ts.links import LinkSet
-from parsim.core.ts.daha import REFRESH_DRIFT, REFRESH_SET
+from parsim.core.ts.daha.driver import REFRESH_DRIFT, REFRESH_SET
 
 
 def brute_force_pairs(X, R, n_moving, gap):

@@ -11,7 +11,7 @@ the dtypes and layouts of the real calls, so the compiled versions are the ones 
 import numpy as np
 
 from parsim.core.ts.contacts import BinnedRows, updated_candidate_pairs
-from parsim.core.ts.daha import _carried, _rebase
+from parsim.core.ts.daha.pairs import _carried, _rebase
 from parsim.core.ts.problem import _cross_pairs
 
 
