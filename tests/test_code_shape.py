@@ -43,14 +43,8 @@ WAITING = {
     "parsim/core/shapes/union.py:_column_moments": {'lines'},
     "parsim/core/structure.py:_shell_counts": {'parameters'},
     "parsim/core/structure.py:_touching_in_cells": {'parameters'},
-    "parsim/core/ts/daha/scheme.py:_kick_damp_drift": {'parameters'},
-    "parsim/core/ts/daha/sleeping.py:_spread": {'parameters'},
-    "parsim/core/ts/daha/sleeping.py:_spread_dense": {'parameters'},
-    "parsim/core/ts/daha/scheme.py:_update_multipliers_near": {'parameters'},
     "parsim/core/ts/frame.py:_first_contact_in_frame": {'parameters'},
     "parsim/core/ts/frame.py:_pairs_in_frame": {'parameters'},
-    "parsim/core/ts/stepper.py:simulate_ts": {'parameters'},
-    "parsim/deposition/spread.py:deposit_streamed": {'parameters'},
 }
 
 

@@ -267,7 +267,11 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
     With ``check``, every particle's owner fingerprints the sediment its descent read when it settles
     it and again when it commits it, and raises :class:`DecompositionError` if they differ.
     A ``rehearsal`` (a warm-up, on one rank: the kernels are the same for any number) also compiles, or
-    loads from the cache, the kernels that only several blocks or a fetch call (:meth:`_RankRun.compile_rare`)."""
+    loads from the cache, the kernels that only several blocks or a fetch call (:meth:`_RankRun.compile_rare`).
+
+    Why so many parameters: they are :func:`parsim.core.sdbd.deposit`'s, each with its default and named
+    by the caller, and the spread run's own few (``halo``, ``window_per_rank``, ``check``, ``rehearsal``);
+    the kernels take them in named groups."""
     settings = dict(trial_angle=trial_angle, cycle_n=cycle_n, cycle_eps=cycle_eps,
                     max_events_per_particle=max_events_per_particle, wall_contact=wall_contact, container=container,
                     cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii)

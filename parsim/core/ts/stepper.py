@@ -797,6 +797,9 @@ def simulate_ts(positions, velocities, radii, masses, box_length, time_step_fact
     ------
     MinimiserFailure
         A minimisation did not converge or went non-finite; the message gives the time step.
+
+    Why so many parameters: the initial condition (four arrays and the box length) and the method's
+    options, each a keyword with its default (Table 1, eq. 4.1, eq. 3.30), named by the caller.
     """
     check_formulation(formulation)
     X = np.array(positions, dtype=np.float64, copy=True)

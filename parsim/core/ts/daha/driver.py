@@ -125,12 +125,12 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags
     Why so many parameters: besides the named bundles (``state`` a :class:`MinimiserState`,
     ``adjacency``, ``pairs``, ``coefficients``, ``checks``, ``ghost_motion``, ``halo``), a call takes the
     progress the previous one returned (iteration, awake and stepped rows, drift, flags, measures)."""
-    P, R, U, new, previous, previous_ghost, built_at, lam, phi, sphere_overlap, attracts, damping_of, is_awake, \
-        settled, is_anchor = state
-    link_ptr, link_to, pair_ptr, pair_of, pair_partner, ghost_ptr, ghost_partner = adjacency
+    P, R, U, new, previous, previous_ghost = state.P, state.R, state.U, state.new, state.previous, state.previous_ghost
+    built_at, lam, phi, damping_of = state.built_at, state.lam, state.phi, state.damping_of
+    is_awake, settled, is_anchor = state.is_awake, state.settled, state.is_anchor
     pair_a, pair_b, cross_pairs = pairs
-    delta, alpha, gamma, c_bar, stable, sleep, stiffness_limit, max_damping, multiplier_rate, floor, n_spheres = \
-        coefficients
+    delta, stable, sleep = coefficients.step, coefficients.stable, coefficients.sleep
+    multiplier_rate, floor, n_spheres = coefficients.multiplier_rate, coefficients.floor, coefficients.n_spheres
     polishing, any_settled = flags
     n_moving = U.shape[0]
     first_ghost = P.shape[0] - previous_ghost.shape[0]
@@ -149,9 +149,7 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags
         stepped = awake
         _drift(P, U, awake, 0.5 * delta)
         _drift_ghosts(P, ghost_U, previous_ghost, first_ghost, 0.5 * delta)
-        _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_partner, lam, sphere_overlap,
-                         guarded, dynamic, delta, alpha, gamma, c_bar, attracts, new, damping_of, stiffness_limit,
-                         max_damping)
+        _kick_damp_drift(state, adjacency, coefficients, awake, guarded, dynamic)
         _copy_rows(P, new, awake)  # accept the new positions
         n_arrived = _share_motion(P, U, damping_of, previous_ghost, is_awake, awake, ghost_motion, halo)
         mostly_awake = 2 * awake.shape[0] > n_moving  # then pair by pair beats sphere by sphere
@@ -160,8 +158,7 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags
         elif mostly_awake:
             _update_multipliers(P, R, phi, pair_a, pair_b, lam, rate, damping_of, stable, ~is_awake)
         else:
-            _update_multipliers_near(P, R, phi, awake, is_awake, n_moving, pair_ptr, pair_of, pair_partner, lam,
-                                     rate, damping_of, stable)
+            _update_multipliers_near(state, adjacency, awake, rate, stable)
             _update_cross_pairs_near(P, R, cross_pairs, pair_a, pair_b, is_awake, phi, lam, rate, damping_of, stable)
         iteration += 1
         if check:
@@ -171,11 +168,9 @@ def _iterations(iteration, last, state, awake, stepped, drift, refresh_at, flags
                 return iteration, awake, stepped, drift, why, (polishing, any_settled), measures
             continue
         if mostly_awake:
-            awake = _spread_dense(P, previous, previous_ghost, arrived[:n_arrived], awake, is_awake, n_moving,
-                                  first_ghost, link_ptr, link_to, pair_a, pair_b, sleep)
+            awake = _spread_dense(state, adjacency, pairs, arrived[:n_arrived], awake, sleep)
         else:
-            awake = _spread(P, previous, previous_ghost, arrived[:n_arrived], awake, is_awake, n_moving, first_ghost,
-                            link_ptr, link_to, pair_ptr, pair_partner, ghost_ptr, ghost_partner, sleep)
+            awake = _spread(state, adjacency, arrived[:n_arrived], awake, sleep)
         if any_settled:
             awake = _drop_settled(awake, settled, is_awake)
     return iteration, awake, stepped, drift, REACHED_LAST, (polishing, any_settled), measures

@@ -29,10 +29,11 @@ def _drift(P, U, awake, h):
 
 
 @jit
-def _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_partner, lam,
-                     sphere_overlap, mean_overlap, dynamic, delta, alpha, gamma, c_bar, attracts, out,
-                     damping_of, stiffness_limit, max_damping):
-    """Forces at the half step, eqs. (3.21)–(3.23); new positions of the awake spheres go to ``out``.
+def _kick_damp_drift(state, adjacency, coefficients, awake, mean_overlap, dynamic):
+    """Forces at the half step, eqs. (3.21)–(3.23); new positions of the awake spheres go to ``state.new``.
+    ``state`` is the driver's ``MinimiserState``, ``adjacency`` its ``Adjacency``, ``coefficients`` its
+    ``Coefficients`` (delta, alpha, gamma, c_bar and the two limits); ``mean_overlap`` is phi_A of (3.29),
+    floored, read when ``dynamic``.
     A sphere whose stiffness ``K`` exceeds ``stiffness_limit / delta^2`` gets its kick scaled
     by ``stiffness_limit / (delta^2 K)`` (package docstring, "Stiff spheres").
 
@@ -40,6 +41,12 @@ def _kick_damp_drift(P, U, R, awake, link_ptr, link_to, pair_ptr, pair_of, pair_
     listed pair read from ``pair_partner``: the same sums in the same order as loops over the
     components with the force in an array and the partner found from the pair's two ends, in
     a little over half their time per sphere update."""
+    P, U, R, lam, sphere_overlap = state.P, state.U, state.R, state.lam, state.sphere_overlap
+    attracts, out, damping_of = state.attracts, state.new, state.damping_of
+    link_ptr, link_to = adjacency.link_ptr, adjacency.link_to
+    pair_ptr, pair_of, pair_partner = adjacency.pair_ptr, adjacency.pair_of, adjacency.pair_partner
+    delta, alpha, gamma, c_bar = coefficients.step, coefficients.attraction, coefficients.penalty, coefficients.damping
+    stiffness_limit, max_damping = coefficients.stiffness_limit, coefficients.max_damping
     three = P.shape[1] == 3
     for i in awake:
         xi, yi = P[i, 0], P[i, 1]
@@ -160,10 +167,12 @@ def _update_multipliers(P, R, phi, pair_a, pair_b, lam, rate, damping_of, stable
 
 
 @jit
-def _update_multipliers_near(P, R, phi, awake, is_awake, n_moving, pair_ptr, pair_of, pair_partner, lam, rate,
-                             damping_of, stable):
+def _update_multipliers_near(state, adjacency, awake, rate, stable):
     """``phi`` and eq. 3.24 on the pairs with an awake end, each once; the pairs of two sleeping
     spheres did not move and sleep too."""
+    P, R, phi, lam, damping_of, is_awake = state.P, state.R, state.phi, state.lam, state.damping_of, state.is_awake
+    pair_ptr, pair_of, pair_partner = adjacency.pair_ptr, adjacency.pair_of, adjacency.pair_partner
+    n_moving = state.U.shape[0]
     for i in awake:
         for e in range(pair_ptr[i], pair_ptr[i + 1]):
             p = pair_of[e]

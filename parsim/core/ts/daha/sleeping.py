@@ -41,11 +41,16 @@ def _wake_ghost_partners(g, first_ghost, is_awake, ghost_ptr, ghost_partner, wok
 
 
 @jit
-def _spread(P, previous, previous_ghost, arrived, awake, is_awake, n_moving, first_ghost, link_ptr, link_to, pair_ptr,
-            pair_partner, ghost_ptr, ghost_partner, tolerance):
+def _spread(state, adjacency, arrived, awake, tolerance):
     """The awake spheres after a partial iteration: those awake, and the partners of those
     (moving ghosts included: the ghost rows that ``arrived`` from their owners) that moved more
-    than ``tolerance`` (a disturbance travels one contact per iteration)."""
+    than ``tolerance`` (a disturbance travels one contact per iteration).  ``state`` and
+    ``adjacency`` are the driver's ``MinimiserState`` and ``Adjacency``."""
+    P, previous, previous_ghost, is_awake = state.P, state.previous, state.previous_ghost, state.is_awake
+    link_ptr, link_to, pair_ptr, pair_partner = adjacency.link_ptr, adjacency.link_to, adjacency.pair_ptr, \
+        adjacency.pair_partner
+    ghost_ptr, ghost_partner = adjacency.ghost_ptr, adjacency.ghost_partner
+    n_moving, first_ghost = state.U.shape[0], P.shape[0] - previous_ghost.shape[0]
     woken = np.empty(n_moving, dtype=np.int64)
     count = 0
     for i in awake:
@@ -60,10 +65,13 @@ def _spread(P, previous, previous_ghost, arrived, awake, is_awake, n_moving, fir
 
 
 @jit
-def _spread_dense(P, previous, previous_ghost, arrived, awake, is_awake, n_moving, first_ghost, link_ptr, link_to,
-                  pair_a, pair_b, tolerance):
+def _spread_dense(state, adjacency, pairs, arrived, awake, tolerance):
     """:func:`_spread` pair by pair and link by link, the same awake spheres: cheaper when most
-    spheres are awake (it visits each pair once, in memory order, not from both ends)."""
+    spheres are awake (it visits each pair once, in memory order, not from both ends).  ``pairs`` is
+    the driver's ``PairLists``."""
+    P, previous, previous_ghost, is_awake = state.P, state.previous, state.previous_ghost, state.is_awake
+    link_ptr, link_to, pair_a, pair_b = adjacency.link_ptr, adjacency.link_to, pairs.pair_a, pairs.pair_b
+    n_moving, first_ghost = state.U.shape[0], P.shape[0] - previous_ghost.shape[0]
     moved = np.zeros(P.shape[0], dtype=np.bool_)
     for i in awake:
         moved[i] = _distance_sq(P, i, previous, i) > tolerance * tolerance
