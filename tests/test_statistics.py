@@ -8,9 +8,11 @@ from parsim.core.statistics import (
     aspect_ratio_and_orientation,
     box_counts,
     cluster_statistics,
+    contact_pairs,
     fit_box_sizes,
     fractal_dimension,
     gyration_tensor,
+    mass_radius_of_gyration,
     pair_distribution,
     pair_distribution_grid,
     radius_of_gyration,
@@ -322,10 +324,13 @@ def test_cluster_statistics_combines_the_indicators():
     aspect_ratio, orientation = aspect_ratio_and_orientation(x)
     assert stats["aspect_ratio"] == aspect_ratio
     np.testing.assert_array_equal(stats["orientation"], orientation)
-    assert stats["contact_number"] == relative_contact_number(x, radius)
+    assert stats["contact_number"] == contact_pairs(x, radii, 2.1) / (len(x) * 6)  # eq. 4.6 pair by pair
     np.testing.assert_array_equal(stats["pair_distribution"], pair_distribution(x, r_values))
     eps, counts = box_counts(x, lower, 64.0, 8)  # L = the longest side
     np.testing.assert_array_equal(stats["box_size"], eps)
     np.testing.assert_array_equal(stats["box_count"], counts)
     assert (stats["fractal_dimension"], stats["fractal_prefactor"]) == fractal_dimension(eps, counts, 3 * radius, 32.0)
-    assert stats["radius_of_gyration"] == radius_of_gyration(x)
+    assert stats["radius_of_gyration"] == mass_radius_of_gyration(x, radii, radii**2)  # one density
+    equal = cluster_statistics(x, np.full(len(x), radius), lower, upper, r_values=r_values, box_levels=8)
+    assert equal["contact_number"] == relative_contact_number(x, radius)
+    assert contact_pairs(x, np.full(len(x), radius), 2.1) / (len(x) * 6) == relative_contact_number(x, radius)

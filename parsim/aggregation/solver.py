@@ -50,10 +50,20 @@ MAX_CONTACT_FACTOR = 10.0
 MAX_PAIR_DISTRIBUTION_POINTS = 10_000
 MAX_ATTRACTION_RANGE = 20.0
 MAX_DAHA_COEFFICIENT = 1e6
+#: A geometric standard deviation beyond which lognormal radii span more than a factor e^6 within two
+#: standard deviations: the aerosol literature uses 1.1-1.5, and a cell list sized by the largest of
+#: such radii holds most spheres in one cell.
+MAX_RADIUS_GEOMETRIC_STD = 3.0
+RADIUS_DISTRIBUTIONS = ("monodisperse", "lognormal")
+WARM_UP_GEOMETRIC_STD = 1.0 + 1e-6
 
 
 def _reads_ts(params: dict) -> bool:
     return params["method"] == "ts"
+
+
+def _reads_radius_spread(params: dict) -> bool:
+    return params["radius_distribution"] == "lognormal"
 
 
 def _reads_speed(params: dict) -> bool:
@@ -82,9 +92,18 @@ PARAMETERS = (
               "uniformly random directions, eq. 4.3) or 'unit_lattice_uniform' (supplementary A: lattice "
               "of spacing 1, box length ceil(N^(1/d)), velocities uniform in [-1/2, 1/2]^d)",
               choices=(PAPER_INITIAL_CONDITION, SUPPLEMENTARY_INITIAL_CONDITION)),
-    Parameter("radius", float, 0.2, LENGTH_UNITS, "sphere radius R", low=0.0, low_inclusive=False,
-              high=LARGEST_QUANTITY),
-    Parameter("mass", float, 1.0, MASS_UNITS, "sphere mass m", low=0.0, low_inclusive=False, high=LARGEST_QUANTITY),
+    Parameter("radius", float, 0.2, LENGTH_UNITS, "sphere radius R (the median radius of lognormal radii)",
+              low=0.0, low_inclusive=False, high=LARGEST_QUANTITY),
+    # Not in the seed: points that differ in their radii alone share positions and velocities, and draw
+    # the same normal deviates for their radii, so sigma_g = 1 is the monodisperse run bit for bit.
+    Parameter("radius_distribution", str, "monodisperse", "1", "monomer radii: all equal to radius, or "
+              "lognormal, r = radius exp(ln(sigma_g) Z) with Z standard normal (FracVAL, MCAC)",
+              choices=RADIUS_DISTRIBUTIONS, affects_seed=False),
+    Parameter("radius_geometric_std", float, 1.0, "1", "geometric standard deviation sigma_g of lognormal radii "
+              "(1: all equal)", low=1.0, high=MAX_RADIUS_GEOMETRIC_STD, affects_seed=False,
+              read_when=_reads_radius_spread),
+    Parameter("mass", float, 1.0, MASS_UNITS, "sphere mass m (of a monomer of radius R; with unequal radii "
+              "m (r / R)^d, one density)", low=0.0, low_inclusive=False, high=LARGEST_QUANTITY),
     Parameter("speed", float, 1.0, SPEED_UNITS, "initial speed |V| (eq. 4.3)",
               low=0.0, low_inclusive=False, high=LARGEST_QUANTITY, read_when=_reads_speed),
     Parameter("max_time", float, math.inf, TIME_UNITS, "stop at this time if several clusters remain",
@@ -145,7 +164,8 @@ STATISTICS = (
     Statistic("box_count", "1", "number of boxes of side eps holding a sphere centre (eq. 4.8)", dims=("box_size",)),
     Statistic("fractal_dimension", "1", "box-counting fractal dimension D_f, fitted on 3R <= eps <= L/2 (eq. 4.8)"),
     Statistic("fractal_prefactor", "1", f"prefactor a of eq. 4.8 with eps in {LENGTH_UNITS}"),
-    Statistic("radius_of_gyration", LENGTH_UNITS, "radius of gyration of the final configuration"),
+    Statistic("radius_of_gyration", LENGTH_UNITS, "radius of gyration of the final configuration, its monomers "
+              "weighted by mass with their own second moments (r^2/2 for a disc, 3r^2/5 for a ball)"),
     Statistic("final_time", TIME_UNITS, "simulated time reached"),
     Statistic("n_clusters", "1", "number of clusters at the end", dtype="int64"),
     Statistic("n_events", "1", "number of events processed (ed) or time steps (ts)", dtype="int64"),
@@ -161,11 +181,46 @@ STATISTICS = (
 
 
 def box_length(params: dict) -> float:
-    """L from the volume fraction (Table 1), or the unit lattice of supplementary A."""
+    """L from the volume fraction (Table 1), or the unit lattice of supplementary A.  With lognormal
+    radii the volume fraction is the expected one: the mean monomer volume is that of a monomer of
+    radius R exp(d ln(sigma_g)^2 / 2), since E[r^d] = R^d exp(d^2 ln(sigma_g)^2 / 2)."""
     n, d = params["n_spheres"], params["dimension"]
     if params["initial_condition"] == SUPPLEMENTARY_INITIAL_CONDITION:
         return float(lattice_sites_per_side(n, d))  # spacing 1
-    return box_length_for_volume_fraction(n, d, params["radius"], params["volume_fraction"])
+    return box_length_for_volume_fraction(n, d, params["radius"] * _volume_radius_factor(params),
+                                          params["volume_fraction"])
+
+
+def _volume_radius_factor(params: dict) -> float:
+    """(E[r^d])^(1/d) / R: 1 for equal radii, exp(d ln(sigma_g)^2 / 2) for lognormal ones."""
+    if params.get("radius_distribution", "monodisperse") != "lognormal":
+        return 1.0
+    return math.exp(params["dimension"] * math.log(params["radius_geometric_std"]) ** 2 / 2.0)
+
+
+def monomer_radii_and_masses(params: dict, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Each monomer's radius and mass: ``radius`` and ``mass`` for all, or lognormal radii ``R exp(ln(sigma_g)
+    Z)`` (median R) with masses ``m (r / R)^d``.  Drawn after the positions and velocities, so that these do
+    not depend on the radii; at sigma_g = 1 every radius is R and every mass m, exactly."""
+    n, radius = params["n_spheres"], params["radius"]
+    if params["radius_distribution"] != "lognormal":
+        return np.full(n, radius), np.full(n, params["mass"])
+    factors = np.exp(math.log(params["radius_geometric_std"]) * rng.standard_normal(n))
+    return radius * factors, params["mass"] * factors ** params["dimension"]
+
+
+def _check_lattice_fits(params: dict, length: float, largest_radius: float) -> None:
+    """Condition 4.2 for the largest monomer drawn: the lattice spacing exceeds its diameter."""
+    spacing = lattice_spacing(params["n_spheres"], params["dimension"], length)
+    if spacing > 2.0 * largest_radius:
+        return
+    if params["radius_distribution"] == "lognormal":
+        raise JobError(f"the initial lattice does not fit the largest radius drawn: spacing {spacing:.6g} must "
+                       f"exceed its diameter {2 * largest_radius:.6g} (condition 4.2); lower volume_fraction, "
+                       f"radius or radius_geometric_std (= {params['radius_geometric_std']:g})")
+    raise JobError(f"the initial lattice does not fit in the box: spacing {spacing:.6g} must exceed the "
+                   f"diameter 2R = {2 * params['radius']:.6g} (condition 4.2, L^d > (2R)^d N); "
+                   "lower volume_fraction or radius")
 
 
 def check(params: dict) -> None:
@@ -183,11 +238,10 @@ def check(params: dict) -> None:
         raise JobError(f"the box length L = {length:.6g} that radius = {params['radius']!r} and volume_fraction = "
                        f"{params['volume_fraction']!r} give for n_spheres = {params['n_spheres']} exceeds "
                        f"{LARGEST_QUANTITY:g}; allowed: a smaller radius or a larger volume_fraction")
-    spacing = lattice_spacing(params["n_spheres"], params["dimension"], length)
-    if not spacing > 2.0 * params["radius"]:
-        raise JobError(f"the initial lattice does not fit in the box: spacing {spacing:.6g} must exceed the "
-                       f"diameter 2R = {2 * params['radius']:.6g} (condition 4.2, L^d > (2R)^d N); "
-                       "lower volume_fraction or radius")
+    if params["radius_distribution"] != "lognormal" and params["radius_geometric_std"] != 1.0:
+        raise JobError(f"radius_geometric_std = {params['radius_geometric_std']!r} needs radius_distribution = "
+                       "'lognormal'; allowed with 'monodisperse': 1 (or leave it out)")
+    _check_lattice_fits(params, length, params["radius"])
     _check_box_counting(params)
 
 
@@ -249,12 +303,26 @@ def warm_up_parameters(params: dict) -> dict:
     one cluster whatever the point's ``max_time`` and ``max_events``, so that it meets collisions,
     minimisations and merges, and compiles their kernels, even for a task of a few time steps.
     """
+    params = _barely_unequal(params)
     n, d = params["n_spheres"], params["dimension"]
     side = WARM_UP_SIDE[d]
     while side ** d < n and not _fits_fractal_dimension({**params, "n_spheres": side ** d}):
         side += 1
     until_one_cluster = {"max_time": math.inf, "max_events": next(p.default for p in PARAMETERS if p.name == "max_events")}
     return {**params, "n_spheres": min(n, side ** d), **until_one_cluster}
+
+
+def _barely_unequal(params: dict) -> dict:
+    """Lognormal radii barely unequal, in the box of the point's radii: the warm-up compiles the kernels of
+    unequal radii, and its lattice, as wide as the point's, fits them whenever it fits the median radius (the
+    point's own largest radius is checked when it is drawn)."""
+    if params["radius_distribution"] != "lognormal":
+        return params
+    warm = {**params, "radius_geometric_std": WARM_UP_GEOMETRIC_STD}
+    if params["volume_fraction"] is not None:  # the same box length: the volume fraction scales with E[r^d]
+        warm["volume_fraction"] = params["volume_fraction"] * (
+            _volume_radius_factor(warm) / _volume_radius_factor(params)) ** params["dimension"]
+    return warm
 
 
 @dataclass
@@ -334,8 +402,8 @@ def solve(params: dict, rng: np.random.Generator, comm: "MPI.Comm", tiled: bool 
             velocities = isotropic_velocities(n, d, params["speed"], rng)
         else:
             velocities = uniform_cube_velocities(n, d, rng)
-        radii = np.full(n, radius)
-        masses = np.full(n, params["mass"])
+        radii, masses = monomer_radii_and_masses(params, rng)
+        _check_lattice_fits(params, length, float(radii.max()))
 
     with phase("steps"):
         if params["method"] == "ts":
@@ -352,7 +420,7 @@ def solve(params: dict, rng: np.random.Generator, comm: "MPI.Comm", tiled: bool 
         shape = cluster_statistics(run.positions, radii, lower, upper,
                                    contact_factor=params["contact_factor"],
                                    r_values=pair_distribution_grid(radius, params["pair_distribution_points"]),
-                                   box_levels=params["box_levels"])
+                                   box_levels=params["box_levels"], masses=masses)
     statistics = {
         "box_length": length,
         **{name: shape[name] for name in ("aspect_ratio", "orientation", "contact_number", "pair_distribution",

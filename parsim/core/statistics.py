@@ -4,10 +4,14 @@ The indicators are those of section 4.2 of Degond et al. (2024), "ballistic
 aggregation ... time stepping" (``papers/ballistic-aggregation-time-stepping-degond-2024.txt``):
 
 - :func:`gyration_tensor`, :func:`radius_of_gyration`: the gyration tensor G(Y) of
-  section 4.2 and sqrt(trace G);
+  section 4.2 and sqrt(trace G) of the centres; :func:`mass_radius_of_gyration`: the R_g of the
+  monomers as bodies, mass-weighted with their own second moments, that of the aerosol fractal law
+  N = k_f (R_g / a)^D_f;
 - :func:`aspect_ratio_and_orientation`: aspect ratio A_r (eq. 4.4) and orientation D
   (eq. 4.5);
-- :func:`relative_contact_number`: relative average number of contacts N_c (eq. 4.6);
+- :func:`relative_contact_number`: relative average number of contacts N_c (eq. 4.6), and
+  :func:`contact_pairs` for unequal radii, a pair in contact when its centres are at most
+  alpha_R (r_i + r_j) / 2 apart (alpha_R R for equal radii, as eq. 4.6);
 - :func:`pair_distribution`, :func:`pair_distribution_grid`: cumulative pair
   distribution P(r) (eq. 4.7) and the paper's grid 2R < r <= 20R;
 - :func:`box_counts`, :func:`fractal_dimension`: box counting N(eps_m), eps_m = L/2^m,
@@ -22,6 +26,7 @@ sorts one Morton code per sphere, O(n log n), and never allocates the grid.
 
 import numpy as np
 
+from parsim.core.celllist import block_cells, build_cells, grid_size, neighbour_offsets
 from parsim.core.jit import jit
 
 # Relative size below which the second gyration eigenvalue is rounding noise of eigh
@@ -45,6 +50,9 @@ CELLS_PER_CUTOFF = 2
 SLOTS_PER_BIN = 8
 # Default N_max of eq. 4.6: kissing numbers of discs in 2D and spheres in 3D.
 DEFAULT_N_MAX = {2: 6, 3: 12}
+#: A monomer's second moment about its centre per unit mass, in units of r^2: a uniform disc (d = 2,
+#: its mass spread over its area) has r^2 / 2, a uniform ball (d = 3) 3 r^2 / 5.
+SELF_MOMENT = {2: 0.5, 3: 0.6}
 
 
 def _as_positions(positions):
@@ -68,6 +76,25 @@ def gyration_tensor(positions):
 def radius_of_gyration(positions):
     """Radius of gyration sqrt(trace G) of the sphere centres."""
     return float(np.sqrt(np.trace(gyration_tensor(positions))))
+
+
+def mass_radius_of_gyration(positions, radii, masses):
+    """Radius of gyration of the monomers as bodies:
+    ``R_g^2 = sum_i m_i (|x_i - x_cm|^2 + c_d r_i^2) / sum_i m_i``, ``x_cm`` the centre of mass and
+    ``c_d r_i^2`` monomer i's own second moment (:data:`SELF_MOMENT`; overlaps of touching monomers are
+    not subtracted).  The R_g of the fractal law ``N = k_f (R_g / a)^D_f`` of the aerosol literature
+    (FracVAL, MCAC), which weights monomers of unequal sizes by their masses."""
+    x = _as_positions(positions)
+    r = np.asarray(radii, dtype=np.float64)
+    m = np.asarray(masses, dtype=np.float64)
+    if r.shape != (x.shape[0],) or m.shape != (x.shape[0],):
+        raise ValueError(f"radii and masses must have shape ({x.shape[0]},), got {r.shape} and {m.shape}")
+    if not (np.all(r > 0.0) and np.all(m > 0.0)):
+        raise ValueError("radii and masses must be > 0")
+    total = m.sum()
+    centre = (m[:, None] * x).sum(axis=0) / total
+    spread = ((x - centre) ** 2).sum(axis=1)
+    return float(np.sqrt((m * (spread + SELF_MOMENT[x.shape[1]] * r * r)).sum() / total))
 
 
 def aspect_ratio_and_orientation(positions):
@@ -238,6 +265,46 @@ def relative_contact_number(positions, radius, contact_factor=2.1, n_max=None):
     x = _as_positions(positions)
     contacts = _pair_counts(x, np.array([_contact_distance(radius, contact_factor)]))
     return _relative(contacts[0], x, n_max)
+
+
+def contact_pairs(positions, radii, contact_factor=2.1):
+    """The ordered pairs (i, j), i = j included as eq. 4.6 prints it, whose centres are at most
+    ``contact_factor (r_i + r_j) / 2`` apart: the contacts of eq. 4.6 for monomers of unequal radii (for
+    equal radii R the bound is eq. 4.6's alpha_R R).  N_c is this count over n N_max."""
+    x = _as_positions(positions)
+    r = np.ascontiguousarray(radii, dtype=np.float64)
+    if r.shape != (x.shape[0],) or not np.all(r > 0.0) or not contact_factor > 0.0:
+        raise ValueError(f"radii must have shape ({x.shape[0]},) and be > 0, contact_factor > 0")
+    lower = x.min(axis=0)
+    shifted = np.ascontiguousarray(x - lower)
+    cutoff = contact_factor * float(r.max())
+    k, side = grid_size(max(float((shifted.max(axis=0)).max()), cutoff), cutoff, x.shape[1], x.shape[0])
+    return x.shape[0] + 2 * _touching_pairs(shifted, r, 0.5 * contact_factor, side, k)
+
+
+@jit
+def _touching_pairs(x, radii, half_factor, side, k):
+    """Unordered pairs i < j with ``|x_i - x_j| <= half_factor (r_i + r_j)``, from a cell list whose cells are
+    at least the largest such distance wide."""
+    n, d = x.shape
+    head, nxt, _, cell_of, _ = build_cells(x, side, k)
+    offsets = neighbour_offsets(d)
+    coords = np.empty(d, dtype=np.int64)
+    block = np.empty(offsets.shape[0], dtype=np.int64)
+    found = 0
+    for i in range(n):
+        for b in range(block_cells(cell_of[i], k, offsets, coords, block)):
+            j = head[block[b]]
+            while j >= 0:
+                if j > i:
+                    s = 0.0
+                    for a in range(d):
+                        s += (x[i, a] - x[j, a]) ** 2
+                    reach = half_factor * (radii[i] + radii[j])
+                    if s <= reach * reach:
+                        found += 1
+                j = nxt[j]
+    return found
 
 
 def _contact_distance(radius, contact_factor):
@@ -415,11 +482,14 @@ def fractal_dimension(eps, counts, eps_min, eps_max):
 
 
 def cluster_statistics(positions, radii, box_lower, box_upper, *, contact_factor=2.1,
-                       r_values, box_levels):
+                       r_values, box_levels, masses=None):
     """All shape indicators of section 4.2 for one configuration.
 
-    R = mean(radii) is the radius of eq. 4.6; L = max(box_upper - box_lower) is the side of
-    the box-counting grid, anchored at box_lower; D_f is fitted over 3R <= eps <= L/2.
+    R = mean(radii) is the radius of the fit range; a pair is in contact (eq. 4.6) within
+    contact_factor (r_i + r_j) / 2, alpha_R R for equal radii; L = max(box_upper - box_lower) is the
+    side of the box-counting grid, anchored at box_lower; D_f is fitted over 3R <= eps <= L/2.  The
+    radius of gyration is :func:`mass_radius_of_gyration`, with ``masses`` (default: proportional to
+    r^d, one density).
     Returns a dict with keys "aspect_ratio", "orientation", "contact_number",
     "pair_distribution" (at ``r_values``), "box_size" (eps_m), "box_count" (N(eps_m)),
     "fractal_dimension", "fractal_prefactor" and "radius_of_gyration".
@@ -437,6 +507,9 @@ def cluster_statistics(positions, radii, box_lower, box_upper, *, contact_factor
     d_f, prefactor = fractal_dimension(eps, counts, *fit_range(radius, box_length))
     contacts, pairs = _contacts_and_pair_distribution(x, _contact_distance(radius, contact_factor),
                                                       _checked_r_values(r_values))
+    if np.any(radii != radii[0]):  # eq. 4.6's bound pair by pair
+        contacts = contact_pairs(x, radii, contact_factor)
+    masses = radii ** x.shape[1] if masses is None else masses
     return {
         "aspect_ratio": aspect_ratio,
         "orientation": orientation,
@@ -446,5 +519,5 @@ def cluster_statistics(positions, radii, box_lower, box_upper, *, contact_factor
         "box_count": counts,
         "fractal_dimension": d_f,
         "fractal_prefactor": prefactor,
-        "radius_of_gyration": radius_of_gyration(x),
+        "radius_of_gyration": mass_radius_of_gyration(x, radii, masses),
     }
