@@ -139,11 +139,12 @@ class TaskOutcome:
     def configuration(self) -> Configuration:
         return self.result.configuration
 
-    def export(self, path: str | os.PathLike, format: str) -> list[Path]:
+    def export(self, path: str | os.PathLike, format: str, **options) -> list[Path]:
         """Write the configuration for another program, as ``parsim export --format FORMAT`` does.
 
         ``format``: one of :data:`parsim.output.export.FORMATS` (extxyz, lammps, vtk, csv, yade,
-        particles; docs/export.md).  ``path`` is the file to write, or an existing folder to
+        particles, voxels, mstm; docs/export.md); ``options`` are a format's own (``voxel_size``,
+        ``height``; ``wavelength``, ``index``).  ``path`` is the file to write, or an existing folder to
         write the task's label + the format's suffix in.  The task goes through a task file in a
         temporary folder that is removed afterwards, so the files are those ``parsim export``
         writes for the job's task.  Returns the files written.
@@ -159,7 +160,7 @@ class TaskOutcome:
             folder.job_copy.write_text(self.job.text, encoding="utf-8")
             task = self.job.tasks()[0]
             write_task_file(folder.task_path(task), self.result, task_attributes(self.job, task))
-            return export_output(folder.root, format, out=Path(path))
+            return export_output(folder.root, format, out=Path(path), **options)
 
     def voxelize(self, voxel_size: float, height: float | None = None):
         """The configuration as a solid/void voxel image (:class:`parsim.output.voxels.VoxelImage`,

@@ -23,6 +23,7 @@ import numpy as np
 from parsim.core.ed import simulate_ed
 from parsim.core.initial import (box_length_for_volume_fraction, isotropic_velocities, lattice_positions,
                                  lattice_sites_per_side, lattice_spacing, uniform_cube_velocities)
+from parsim.core.scattering import structure_factor
 from parsim.core.statistics import MIN_FIT_BOX_SIZES, cluster_statistics, fit_box_sizes, pair_distribution_grid
 from parsim.core.ts import FORMULATIONS, DahaParameters, MinimiserFailure, simulate_ts
 from parsim.core.ts.rare import compile_rare_kernels
@@ -50,6 +51,7 @@ MAX_CONTACT_FACTOR = 10.0
 MAX_PAIR_DISTRIBUTION_POINTS = 10_000
 MAX_ATTRACTION_RANGE = 20.0
 MAX_DAHA_COEFFICIENT = 1e6
+MAX_STRUCTURE_FACTOR_POINTS = 10_000
 #: A geometric standard deviation beyond which lognormal radii span more than a factor e^6 within two
 #: standard deviations: the aerosol literature uses 1.1-1.5, and a cell list sized by the largest of
 #: such radii holds most spheres in one cell.
@@ -116,6 +118,17 @@ PARAMETERS = (
               low=2, high=MAX_PAIR_DISTRIBUTION_POINTS, sweepable=False),
     Parameter("box_levels", int, 12, "1", "box-counting levels m = 1..box_levels, eps_m = L / 2^m (eq. 4.8)",
               low=2, high=30, sweepable=False),
+    # Off by default: Debye's sum visits every pair, 7 s at N = 4e4 on one core where the run itself takes 1-5 s.
+    Parameter("compute_structure_factor", bool, False, "1", "compute the static structure factor S(q) of the final "
+              "configuration (Debye's formula over all pairs, O(N^2); the statistic structure_factor is NaN when "
+              "false)", affects_seed=False),
+    Parameter("structure_factor_points", int, 24, "1", "number of q values of S(q), log-spaced from "
+              "structure_factor_q_min to structure_factor_q_max", low=2, high=MAX_STRUCTURE_FACTOR_POINTS,
+              sweepable=False),
+    Parameter("structure_factor_q_min", float, 0.01, "1", "smallest q of S(q), in units of 1/R", low=0.0,
+              low_inclusive=False, high=LARGEST_QUANTITY, sweepable=False),
+    Parameter("structure_factor_q_max", float, 2.0, "1", "largest q of S(q), in units of 1/R", low=0.0,
+              low_inclusive=False, high=LARGEST_QUANTITY, sweepable=False),
     _ts("time_step_factor", float, 0.005, "1", "dt(0) = factor L / max|V| (Table 1: 0.005, 0.01, 0.015); "
         "dt grows as ln(mean cluster size) to 2 dt(0) at one cluster", low=0.0, low_inclusive=False, high=1.0),
     _ts("formulation", str, "almost_rigid", "1", "'almost_rigid' (section 3.3: tiles, local attraction) or "
@@ -164,6 +177,8 @@ STATISTICS = (
     Statistic("box_count", "1", "number of boxes of side eps holding a sphere centre (eq. 4.8)", dims=("box_size",)),
     Statistic("fractal_dimension", "1", "box-counting fractal dimension D_f, fitted on 3R <= eps <= L/2 (eq. 4.8)"),
     Statistic("fractal_prefactor", "1", f"prefactor a of eq. 4.8 with eps in {LENGTH_UNITS}"),
+    Statistic("structure_factor", "1", "static structure factor S(q) of the monomer centres, Debye's formula "
+              "(sin(qr)/(qr) in 3-D, J0(qr) in 2-D; NaN unless compute_structure_factor = true)", dims=("q",)),
     Statistic("radius_of_gyration", LENGTH_UNITS, "radius of gyration of the final configuration, its monomers "
               "weighted by mass with their own second moments (r^2/2 for a disc, 3r^2/5 for a ball)"),
     Statistic("final_time", TIME_UNITS, "simulated time reached"),
@@ -238,6 +253,9 @@ def check(params: dict) -> None:
         raise JobError(f"the box length L = {length:.6g} that radius = {params['radius']!r} and volume_fraction = "
                        f"{params['volume_fraction']!r} give for n_spheres = {params['n_spheres']} exceeds "
                        f"{LARGEST_QUANTITY:g}; allowed: a smaller radius or a larger volume_fraction")
+    if not params["structure_factor_q_min"] < params["structure_factor_q_max"]:
+        raise JobError(f"structure_factor_q_min = {params['structure_factor_q_min']!r} must be below "
+                       f"structure_factor_q_max = {params['structure_factor_q_max']!r}")
     if params["radius_distribution"] != "lognormal" and params["radius_geometric_std"] != 1.0:
         raise JobError(f"radius_geometric_std = {params['radius_geometric_std']!r} needs radius_distribution = "
                        "'lognormal'; allowed with 'monodisperse': 1 (or leave it out)")
@@ -268,7 +286,14 @@ def coordinates(fixed: dict) -> dict[str, Coordinate]:
         "component": coded_coordinate("Cartesian component", components),
         "r": Coordinate(r_over_radius, "1", "pair distance r in units of the sphere radius R"),
         "box_size": Coordinate(2.0 ** -levels, "1", "box side relative to the box length, eps_m / L = 2^-m"),
+        "q": Coordinate(structure_factor_grid(fixed), "1", "scattering wavenumber q in units of 1/R"),
     }
+
+
+def structure_factor_grid(fixed: dict) -> np.ndarray:
+    """The q R values of S(q): ``structure_factor_points`` log-spaced from q_min R to q_max R."""
+    return np.geomspace(fixed["structure_factor_q_min"], fixed["structure_factor_q_max"],
+                        fixed["structure_factor_points"])
 
 
 def cost(params: dict) -> float:
@@ -421,11 +446,15 @@ def solve(params: dict, rng: np.random.Generator, comm: "MPI.Comm", tiled: bool 
                                    contact_factor=params["contact_factor"],
                                    r_values=pair_distribution_grid(radius, params["pair_distribution_points"]),
                                    box_levels=params["box_levels"], masses=masses)
+        q_grid = structure_factor_grid(params)
+        scattering = (structure_factor(run.positions, q_grid / radius) if params["compute_structure_factor"]
+                      else np.full(q_grid.size, np.nan))
     statistics = {
         "box_length": length,
         **{name: shape[name] for name in ("aspect_ratio", "orientation", "contact_number", "pair_distribution",
                                           "box_count", "fractal_dimension", "fractal_prefactor",
                                           "radius_of_gyration")},
+        "structure_factor": scattering,
         "final_time": run.time,
         "n_clusters": int(run.cluster.max()) + 1,
         "n_events": run.n_events,

@@ -17,6 +17,8 @@ csv           LABEL.csv                  parsim's ``agglomerate_file``, spreadsh
 yade          LABEL.txt                  YADE ``ymport.textExt`` / ``ymport.textClumps``
 particles     LABEL_particles.csv and    multi-sphere DEM codes: one rigid body per row,
               LABEL_shapes.csv           the sphere template of each shape (deposition only)
+mstm          LABEL.inp                  MSTM, the multiple-sphere T-matrix code (with
+                                         ``--wavelength`` and ``--refractive-index``)
 ============  =========================  ================================================
 
 Discs (aggregation with ``dimension = 2``) are written as spheres at z = 0, in a box whose
@@ -38,6 +40,7 @@ import numpy as np
 
 from parsim import options
 from parsim.errors import JobError, OutputError
+from parsim.output.mstm import check_options, refractive_index, write_mstm
 from parsim.output.atomic import written_atomically
 from parsim.output.voxels import image_grid, write_voxels
 from parsim.version import __version__
@@ -364,7 +367,10 @@ FORMATS: dict[str, Format] = {
                         check=check_particle_table),
     "voxels": Format("_voxels.npy", write_voxels, "porespy, OpenPNM (numpy); image tools (.raw + .json, .tif); "
                      "3-D tasks, with --voxel-size", check=image_grid),
+    "mstm": Format(".inp", write_mstm, "MSTM multiple-sphere T-matrix, with --wavelength and --refractive-index"),
 }
+#: The options of the formats that take any, by the names export_output takes them.
+FORMAT_OPTIONS = {"voxels": ("voxel_size", "height"), "mstm": ("wavelength", "index")}
 
 
 def _job_folder(output: Path) -> tuple[str, list[Path]]:
@@ -381,7 +387,8 @@ def _job_folder(output: Path) -> tuple[str, list[Path]]:
 
 
 def export_output(output: Path, format: str, task: str | None = None, all_tasks: bool = False,
-                  out: Path | None = None, voxel_size: float | None = None, height: float | None = None) -> list[Path]:
+                  out: Path | None = None, voxel_size: float | None = None, height: float | None = None,
+                  wavelength: float | None = None, index: complex | None = None) -> list[Path]:
     """Export the task ``task`` (default: the job's first task that has a task file) or every task of the
     job in ``output`` as ``format``; the files written.
 
@@ -389,18 +396,26 @@ def export_output(output: Path, format: str, task: str | None = None, all_tasks:
     in (an existing folder, a path ending in a slash, or a name without a suffix; created if need
     be); for every task, the folder (both default to OUTPUT/export).  A ``vtk`` export of every
     task also writes JOB.pvd, the collection ParaView opens as one series.  ``voxel_size`` and
-    ``height`` are those of format ``voxels`` (:mod:`parsim.output.voxels`).  Every task is checked
+    ``height`` are those of format ``voxels`` (:mod:`parsim.output.voxels`), ``wavelength`` and ``index`` (the
+    refractive index) those of format ``mstm`` (:mod:`parsim.output.mstm`).  Every task is checked
     (the format's ``check``) before the folder is created: a refusal makes nothing.
     """
     if format not in FORMATS:
         raise JobError(f"unknown export format {format!r}; allowed: {', '.join(FORMATS)}")
     spec = FORMATS[format]
-    options = {name: value for name, value in (("voxel_size", voxel_size), ("height", height)) if value is not None}
+    given = {"voxel_size": voxel_size, "height": height, "wavelength": wavelength, "index": index}
+    options = {name: value for name, value in given.items() if value is not None}
+    stray = sorted(set(options) - set(FORMAT_OPTIONS.get(format, ())))
+    if stray:
+        flags = ", ".join("--" + ("refractive-index" if name == "index" else name.replace("_", "-")) for name in stray)
+        owners = " and ".join(f"{name!r}" for name, names in FORMAT_OPTIONS.items() if set(stray) & set(names))
+        raise JobError(f"{flags}: options of format {owners}, not {format!r}")
     if format == "voxels":
         spec = replace(spec, write=functools.partial(spec.write, **options),
                        check=functools.partial(spec.check, **options))
-    elif options:
-        raise JobError(f"--voxel-size and --height are options of format 'voxels', not {format!r}")
+    elif format == "mstm":
+        check_options(wavelength, index)
+        spec = replace(spec, write=functools.partial(spec.write, wavelength=wavelength, index=index))
     output = Path(output)
     job_name, files = _job_folder(output)
     if all_tasks:
@@ -463,15 +478,27 @@ def add_export_command(subparsers) -> None:
     export.add_argument("--height", type=float, metavar="H",
                         help="format voxels: the image's height above the floor (default: the top of the highest "
                              "sphere)")
+    export.add_argument("--wavelength", type=float, metavar="LAMBDA",
+                        help="format mstm: the wavelength of the light, in the task's length unit")
+    export.add_argument("--refractive-index", type=_refractive_index, metavar="M",
+                        help="format mstm: the spheres' complex refractive index, e.g. 1.6+0.6j")
     export.add_argument("--out", type=options.target, metavar="PATH",
                         help="the file to write, or a folder to write LABEL.suffix in (an existing folder, DIR/ "
                              "or a name without a suffix; default OUTPUT/export); with --all, the folder "
                              "(default OUTPUT/export)")
 
 
+def _refractive_index(text: str) -> complex:
+    try:
+        return refractive_index(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def run_export(args: argparse.Namespace) -> int:
     """``parsim export``: write the files and print their paths; errors are one-line ParsimErrors."""
     for path in export_output(args.output, args.format, task=args.task, all_tasks=args.all, out=args.out,
-                              voxel_size=args.voxel_size, height=args.height):
+                              voxel_size=args.voxel_size, height=args.height, wavelength=args.wavelength,
+                              index=args.refractive_index):
         print(path)
     return 0
