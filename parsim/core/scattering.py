@@ -46,6 +46,7 @@ import math
 import numpy as np
 
 from parsim.core.jit import jit
+from parsim.core.statistics import as_positions
 
 METHODS = ("auto", "direct", "histogram")
 #: q_max times the histogram's bin width: each pair's error is at most C (q w)^2 <= 2.5e-7.
@@ -107,13 +108,7 @@ def histogram_width(r_bound, q_max):
 
 def _checked(positions, q, method):
     """``positions`` and ``q`` as contiguous float64 arrays, or ValueError naming the bad argument."""
-    x = np.ascontiguousarray(positions, dtype=np.float64)
-    if x.ndim != 2 or x.shape[1] not in (2, 3):
-        raise ValueError(f"positions must have shape (n, 2) or (n, 3), got {x.shape}")
-    if x.shape[0] < 1:
-        raise ValueError("positions must hold at least one monomer (n >= 1), got n = 0")
-    if not np.all(np.isfinite(x)):
-        raise ValueError("positions must be finite, got NaN or infinite values")
+    x = as_positions(positions)
     q = np.ascontiguousarray(q, dtype=np.float64)
     if q.ndim != 1 or q.size < 1:
         raise ValueError(f"q must be a non-empty 1-D array, got shape {q.shape}")

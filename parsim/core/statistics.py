@@ -55,20 +55,21 @@ DEFAULT_N_MAX = {2: 6, 3: 12}
 SELF_MOMENT = {2: 0.5, 3: 0.6}
 
 
-def _as_positions(positions):
+def as_positions(positions):
+    """``positions`` as a contiguous (n, d) float64 array, d = 2 or 3, n >= 1, finite; else ValueError naming it."""
     x = np.ascontiguousarray(positions, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] not in (2, 3):
         raise ValueError(f"positions must have shape (n, 2) or (n, 3), got {x.shape}")
     if x.shape[0] < 1:
-        raise ValueError("need at least one sphere")
+        raise ValueError("positions must hold at least one sphere (n >= 1), got n = 0")
     if not np.all(np.isfinite(x)):
-        raise ValueError("positions contain NaN or infinite values")
+        raise ValueError("positions must be finite, got NaN or infinite values")
     return x
 
 
 def gyration_tensor(positions):
     """Gyration tensor G = (1/n) sum_i y_i y_i^T with y = x - mean(x), shape (d, d)."""
-    x = _as_positions(positions)
+    x = as_positions(positions)
     y = x - x.mean(axis=0)
     return y.T @ y / x.shape[0]
 
@@ -84,7 +85,7 @@ def mass_radius_of_gyration(positions, radii, masses):
     ``c_d r_i^2`` monomer i's own second moment (:data:`SELF_MOMENT`; overlaps of touching monomers are
     not subtracted).  The R_g of the fractal law ``N = k_f (R_g / a)^D_f`` of the aerosol literature
     (FracVAL, MCAC), which weights monomers of unequal sizes by their masses."""
-    x = _as_positions(positions)
+    x = as_positions(positions)
     r = np.asarray(radii, dtype=np.float64)
     m = np.asarray(masses, dtype=np.float64)
     if r.shape != (x.shape[0],) or m.shape != (x.shape[0],):
@@ -112,7 +113,7 @@ def aspect_ratio_and_orientation(positions):
     Raises ValueError for fewer than two spheres, or when all centres coincide (no
     direction exists).
     """
-    x = _as_positions(positions)
+    x = as_positions(positions)
     if x.shape[0] < 2:
         raise ValueError("need at least two spheres")
     eigenvalues, eigenvectors = np.linalg.eigh(gyration_tensor(x))  # ascending order
@@ -262,7 +263,7 @@ def relative_contact_number(positions, radius, contact_factor=2.1, n_max=None):
     ``radius`` is the scalar R (pass the mean radius for polydisperse spheres).
     ``n_max`` defaults to 6 in 2D and 12 in 3D.
     """
-    x = _as_positions(positions)
+    x = as_positions(positions)
     contacts = _pair_counts(x, np.array([_contact_distance(radius, contact_factor)]))
     return _relative(contacts[0], x, n_max)
 
@@ -271,7 +272,7 @@ def contact_pairs(positions, radii, contact_factor=2.1):
     """The ordered pairs (i, j), i = j included as eq. 4.6 prints it, whose centres are at most
     ``contact_factor (r_i + r_j) / 2`` apart: the contacts of eq. 4.6 for monomers of unequal radii (for
     equal radii R the bound is eq. 4.6's alpha_R R).  N_c is this count over n N_max."""
-    x = _as_positions(positions)
+    x = as_positions(positions)
     r = np.ascontiguousarray(radii, dtype=np.float64)
     if r.shape != (x.shape[0],) or not np.all(r > 0.0) or not contact_factor > 0.0:
         raise ValueError(f"radii must have shape ({x.shape[0]},) and be > 0, contact_factor > 0")
@@ -326,7 +327,7 @@ def pair_distribution(positions, r_values):
     ``r_values``; returns an array of the same length. Each unordered pair i != j is found
     once with a cell list and counted twice.
     """
-    x = _as_positions(positions)
+    x = as_positions(positions)
     r = _checked_r_values(r_values)
     return _pair_counts(x, r) / x.shape[0] if r.size else np.zeros(0)
 
@@ -421,7 +422,7 @@ def box_counts(positions, box_lower, box_length, levels):
 
     Returns (eps, counts), both float64 arrays of length ``levels``.
     """
-    x = _as_positions(positions)
+    x = as_positions(positions)
     d = x.shape[1]
     lower = np.ascontiguousarray(box_lower, dtype=np.float64)
     if lower.shape != (d,):
@@ -494,7 +495,7 @@ def cluster_statistics(positions, radii, box_lower, box_upper, *, contact_factor
     "pair_distribution" (at ``r_values``), "box_size" (eps_m), "box_count" (N(eps_m)),
     "fractal_dimension", "fractal_prefactor" and "radius_of_gyration".
     """
-    x = _as_positions(positions)
+    x = as_positions(positions)
     radii = np.asarray(radii, dtype=np.float64)
     if radii.shape != (x.shape[0],):
         raise ValueError(f"radii must have shape ({x.shape[0]},), got {radii.shape}")
