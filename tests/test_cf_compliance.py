@@ -225,8 +225,10 @@ def dataset_of(body: str) -> xr.Dataset:
 
 
 def test_ts_keys_are_coordinates_only_of_jobs_with_ts_tasks():
-    """The keys of the time-stepping method, and the speed the supplementary initial condition does not read."""
-    ts_only = {p.name for p in SOLVERS["aggregation"].parameters if p.read_when is not None} - {"speed"}
+    """The keys of the time-stepping method, the speed the supplementary initial condition does not read, and
+    the spread of lognormal radii."""
+    ts_only = {p.name for p in SOLVERS["aggregation"].parameters if p.read_when is not None} - {"speed",
+                                                                                                 "radius_geometric_std"}
     assert {"daha_damping", "time_step_factor", "formulation"} <= ts_only
     ed = dataset_of("[parameters]\nn_spheres = 16\nvolume_fraction = 0.2\n")
     assert not ts_only & set(ed.coords) and "speed" in ed.coords and "method" in ed.coords
@@ -234,6 +236,9 @@ def test_ts_keys_are_coordinates_only_of_jobs_with_ts_tasks():
     assert ts_only <= set(both.coords)
     supplementary = dataset_of('[parameters]\nn_spheres = 16\ninitial_condition = "unit_lattice_uniform"\n')
     assert "speed" not in supplementary.coords and "volume_fraction" not in supplementary.coords
+    assert "radius_geometric_std" not in ed.coords
+    lognormal = dataset_of('[parameters]\nn_spheres = 16\nvolume_fraction = 0.1\nradius_distribution = "lognormal"\n')
+    assert "radius_geometric_std" in lognormal.coords
 
 
 def test_the_units_a_job_names_reach_every_variable_of_their_quantity():

@@ -75,7 +75,7 @@ def test_a_job_grown_in_two_steps_equals_the_grown_job_run_at_once(tmp_path):
     # the first run's 4 tasks were kept: the second computed the other 3 x 2 x 3 - 4 = 14
     assert rows_per_file(tmp_path / "out" / "rows", GROWN) == [4, 14]
     assert grown.sizes == {"volume_fraction": 3, "n_spheres": 2, "realization": 3, "box_size": 4,
-                           "component": 2, "r": 8}
+                           "component": 2, "r": 8, "q": 24}
 
 
 def test_validate_says_how_many_tasks_a_grown_job_computes_and_refuses_a_changed_one(tmp_path):

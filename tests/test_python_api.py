@@ -333,7 +333,7 @@ def test_the_worked_example_of_the_python_api_runs(tmp_path, monkeypatch):
     matplotlib.use("Agg")
     monkeypatch.chdir(tmp_path)
     blocks = python_blocks(DOC.read_text(encoding="utf-8"))
-    assert len(blocks) == 3
+    assert len(blocks) == 4
     namespace = {}
     for block in blocks:
         exec(compile(block, str(DOC), "exec"), namespace)

@@ -28,7 +28,7 @@ def new_record(n, d, momenta):
                        np.zeros((n_momenta, d)), np.zeros((n_momenta, d)))
 
 
-@jit
+@jit(inline="always")  # one call site, in the event loop: a call would pass every array of the bundles
 def merge(i, j, t, k_merge, clusters, grid, lists, nbr, x, record):
     """Merge the clusters of touching spheres ``i`` and ``j`` at ``t`` (eq. 2.9).
 
@@ -90,7 +90,7 @@ def merge(i, j, t, k_merge, clusters, grid, lists, nbr, x, record):
             x[a] -= D[big, a]
         bin_sphere(k, x, grid)
         detach(k, nbr, lists.nn)
-        nbr = attach(k, ANY_PARTNER, clusters, grid, lists, nbr)
+        nbr = attach(k, ANY_PARTNER, R, cl, grid, lists, nbr)
         k = nxt[k]
     if record.momenta:
         cluster_momentum(big, clusters, record.momentum_after[k_merge])
@@ -100,7 +100,7 @@ def merge(i, j, t, k_merge, clusters, grid, lists, nbr, x, record):
     return nbr, big
 
 
-@jit
+@jit(inline="always")  # one call site, in the event loop: a call would pass every array of the bundles
 def reflect(c, face, t, clusters, L):
     """Reflect cluster ``c`` off the wall ``face = 2 axis + side`` at ``t`` (eq. 2.2).
 

@@ -56,7 +56,7 @@ def reserve(queue, need, cl, ver):
     return EventQueue(ht, hs, hd, size, queue.seq)
 
 
-@jit
+@jit(inline="always")  # one call site, in the event loop: a call would pass every array of the bundles
 def next_event(queue, ev, clusters):
     """Pop events until a current one, into ``ev``: ``(found, time, queue)``."""
     ht, hs, hd, size = queue.times, queue.seqs, queue.data, queue.size
@@ -101,7 +101,7 @@ def initial_events(clusters, lists, nbr, max_time, L):
     return EventQueue(ht, hs, hd, size, seq)
 
 
-@jit
+@jit(inline="always")  # one call site, in the event loop: a call would pass every array of the bundles
 def predict_cluster(c, t, max_time, L, h, clusters, lists, nbr, queue):
     """Queue the pair events of cluster ``c``'s boundary, its wall and its re-bin event.
 

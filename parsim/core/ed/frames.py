@@ -59,14 +59,14 @@ def new_clusters(X0, V0, R, m, h):
                     np.full(n, -1, dtype=np.int64), lo, hi, np.arange(n), t_rebin, stamp)
 
 
-@jit
+@jit(inline="always")
 def restamp(clusters, c):
     """Give cluster ``c`` a new version: every event queued with its old one becomes stale."""
     clusters.ver[c] = clusters.stamp[0]
     clusters.stamp[0] += 1
 
 
-@jit
+@jit(inline="always")
 def position(i, t, clusters, out):
     """Centre of sphere ``i`` at time ``t`` into ``out``."""
     P, cl, O, V, T0 = clusters.P, clusters.cl, clusters.O, clusters.V, clusters.T0
@@ -76,7 +76,7 @@ def position(i, t, clusters, out):
         out[a] = (O[c, a] + V[c, a] * s) + P[i, a]
 
 
-@jit
+@jit(inline="always")
 def rebase(c, t, clusters):
     """Move cluster ``c``'s reference time to ``t`` (origin and displacement since binning)."""
     O, D, V, T0 = clusters.O, clusters.D, clusters.V, clusters.T0
@@ -88,7 +88,7 @@ def rebase(c, t, clusters):
     T0[c] = t
 
 
-@jit
+@jit(inline="always")
 def pair_time(i, j, t, clusters):
     """Absolute collision time of spheres ``i`` and ``j`` (eq. A.3), or inf."""
     P, R, cl, O, V, T0 = clusters.P, clusters.R, clusters.cl, clusters.O, clusters.V, clusters.T0
@@ -117,7 +117,7 @@ def pair_time(i, j, t, clusters):
     return t + dt
 
 
-@jit
+@jit(inline="always")
 def wall_time(c, t, clusters, L):
     """Next wall contact of cluster ``c``'s bounding box: ``(time, axis, side)``."""
     O, V, T0, lo, hi = clusters.O, clusters.V, clusters.T0, clusters.lo, clusters.hi
@@ -145,7 +145,7 @@ def wall_time(c, t, clusters, L):
     return t + best, axis, side
 
 
-@jit
+@jit(inline="always")
 def rebin_time(c, t, D, V, T0, h):
     """Time at which ``|delta_c|`` reaches ``h``, or inf for a cluster at rest."""
     s = t - T0[c]

@@ -74,11 +74,11 @@ def new_lists(clusters, grid, skin):
                            np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64),
                            np.full(n, -1, dtype=np.int64), skin)
     for i in range(n):
-        nbr = attach(i, GREATER_ONLY, clusters, grid, lists, nbr)
+        nbr = attach(i, GREATER_ONLY, clusters.R, clusters.cl, grid, lists, nbr)
     return lists, nbr
 
 
-@jit
+@jit(inline="always")
 def mark_boundary(k, c, lists):
     """Append sphere ``k`` to cluster ``c``'s boundary list unless it is on it."""
     inb, bnext, bhead, btail = lists.inb, lists.bnext, lists.bhead, lists.btail
@@ -122,13 +122,15 @@ def detach(i, nbr, nn):
 
 
 @jit
-def attach(i, only_greater, clusters, grid, lists, nbr):
-    """Find the cross-cluster neighbours of ``i`` in the grid and list the pairs both ways.
+def attach(i, only_greater, R, cl, grid, lists, nbr):
+    """Find the cross-cluster neighbours of ``i`` (radii ``R``, clusters ``cl``) in the grid and list the
+    pairs both ways.
 
     With ``only_greater`` only partners ``j > i`` are taken (initial build).  Returns the
-    neighbour array (reallocated if a list overflowed).
+    neighbour array (reallocated if a list overflowed).  It takes the two arrays it reads rather
+    than the whole :class:`Clusters`: a call passes every array of a bundle, and this one runs for
+    every sphere re-binned.
     """
-    R, cl = clusters.R, clusters.cl
     Xb, nn, skin = grid.binned, lists.nn, lists.skin
     d = Xb.shape[1]
     ci = cl[i]
@@ -152,7 +154,7 @@ def attach(i, only_greater, clusters, grid, lists, nbr):
     return nbr
 
 
-@jit
+@jit(inline="always")
 def bin_sphere(k, x, grid):
     """Bin sphere ``k`` at position ``x``."""
     Xb = grid.binned
@@ -162,7 +164,7 @@ def bin_sphere(k, x, grid):
                  grid.cell_prev, grid.cell_of, grid.cell_count)
 
 
-@jit
+@jit(inline="always")  # one call site, in the event loop: a call would pass every array of the bundles
 def rebin_cluster(c, t, clusters, grid, lists, nbr, x):
     """Re-bin every sphere of cluster ``c`` at its position at ``t`` and rebuild its lists.
 
@@ -195,7 +197,7 @@ def rebin_cluster(c, t, clusters, grid, lists, nbr, x):
                 alone = False
                 break
         if not alone:
-            nbr = attach(k, ANY_PARTNER, clusters, grid, lists, nbr)
+            nbr = attach(k, ANY_PARTNER, clusters.R, clusters.cl, grid, lists, nbr)
         k = nxt[k]
     k = head[c]
     while k >= 0:
