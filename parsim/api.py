@@ -144,7 +144,7 @@ class TaskOutcome:
 
         ``format``: one of :data:`parsim.output.export.FORMATS` (extxyz, lammps, vtk, csv, yade,
         particles, voxels, mstm; docs/export.md); ``options`` are a format's own (``voxel_size``,
-        ``height``; ``wavelength``, ``index``).  ``path`` is the file to write, or an existing folder to
+        ``height``; ``wavelength``, ``refractive_index``).  ``path`` is the file to write, or an existing folder to
         write the task's label + the format's suffix in.  The task goes through a task file in a
         temporary folder that is removed afterwards, so the files are those ``parsim export``
         writes for the job's task.  Returns the files written.

@@ -26,7 +26,8 @@ from parsim.solver import Configuration  # noqa: E402
 def test_a_cluster_reads_in_mstm_as_its_spheres_in_size_parameters(tmp_path):
     cluster = parsim.aggregate(12, seed=3, dimension=3, volume_fraction=0.01)
     wavelength = 2.0 * math.pi * 0.2  # size parameter 1 for a monomer of radius 0.2
-    [path] = cluster.export(tmp_path / "cluster.inp", "mstm", wavelength=wavelength, index=1.6 + 0.6j)
+    [path] = cluster.export(tmp_path / "cluster.inp", "mstm", wavelength=wavelength,
+                             refractive_index=1.6 + 0.6j)
     config = parse_inp_text(path.read_text())
     x, r = cluster.configuration.arrays["spheres/position"], cluster.configuration.arrays["spheres/radius"]
     assert config.nspheres == 12
@@ -82,4 +83,4 @@ def test_the_command_needs_its_two_options_and_refuses_bad_ones(tmp_path):
     assert parse_inp_text(open(done.stdout.strip()).read()).nspheres == 16
     with pytest.raises(JobError, match="--wavelength -1.0: allowed a finite number > 0"):
         parsim.aggregate(16, seed=1, volume_fraction=0.1).export(tmp_path / "x.inp", "mstm", wavelength=-1.0,
-                                                                 index=1.5 + 0j)
+                                                                 refractive_index=1.5 + 0j)

@@ -93,7 +93,7 @@ def test_read_configuration_gives_the_one_rank_configuration(outputs):
 
 def exported(output, format, folder):
     """Every task of ``output`` exported as ``format`` into ``folder``: {file name: bytes}."""
-    options = {"voxels": {"voxel_size": VOXEL_SIZE}, "mstm": {"wavelength": 0.5, "index": 1.6 + 0.6j}}.get(format, {})
+    options = {"voxels": {"voxel_size": VOXEL_SIZE}, "mstm": {"wavelength": 0.5, "refractive_index": 1.6 + 0.6j}}.get(format, {})
     files = export_output(output, format, all_tasks=True, out=folder, **options)
     return {path.name: path.read_bytes() for path in files}
 

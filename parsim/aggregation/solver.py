@@ -229,7 +229,7 @@ def _check_lattice_fits(params: dict, length: float, largest_radius: float) -> N
     spacing = lattice_spacing(params["n_spheres"], params["dimension"], length)
     if spacing > 2.0 * largest_radius:
         return
-    if params["radius_distribution"] == "lognormal":
+    if largest_radius > params["radius"]:
         raise JobError(f"the initial lattice does not fit the largest radius drawn: spacing {spacing:.6g} must "
                        f"exceed its diameter {2 * largest_radius:.6g} (condition 4.2); lower volume_fraction, "
                        f"radius or radius_geometric_std (= {params['radius_geometric_std']:g})")

@@ -40,7 +40,7 @@ import numpy as np
 
 from parsim import options
 from parsim.errors import JobError, OutputError
-from parsim.output.mstm import check_options, refractive_index, write_mstm
+from parsim.output import mstm
 from parsim.output.atomic import written_atomically
 from parsim.output.voxels import image_grid, write_voxels
 from parsim.version import __version__
@@ -367,10 +367,10 @@ FORMATS: dict[str, Format] = {
                         check=check_particle_table),
     "voxels": Format("_voxels.npy", write_voxels, "porespy, OpenPNM (numpy); image tools (.raw + .json, .tif); "
                      "3-D tasks, with --voxel-size", check=image_grid),
-    "mstm": Format(".inp", write_mstm, "MSTM multiple-sphere T-matrix, with --wavelength and --refractive-index"),
+    "mstm": Format(".inp", mstm.write_mstm, "MSTM multiple-sphere T-matrix, with --wavelength and --refractive-index"),
 }
 #: The options of the formats that take any, by the names export_output takes them.
-FORMAT_OPTIONS = {"voxels": ("voxel_size", "height"), "mstm": ("wavelength", "index")}
+FORMAT_OPTIONS = {"voxels": ("voxel_size", "height"), "mstm": ("wavelength", "refractive_index")}
 
 
 def _job_folder(output: Path) -> tuple[str, list[Path]]:
@@ -388,7 +388,7 @@ def _job_folder(output: Path) -> tuple[str, list[Path]]:
 
 def export_output(output: Path, format: str, task: str | None = None, all_tasks: bool = False,
                   out: Path | None = None, voxel_size: float | None = None, height: float | None = None,
-                  wavelength: float | None = None, index: complex | None = None) -> list[Path]:
+                  wavelength: float | None = None, refractive_index: complex | None = None) -> list[Path]:
     """Export the task ``task`` (default: the job's first task that has a task file) or every task of the
     job in ``output`` as ``format``; the files written.
 
@@ -396,26 +396,27 @@ def export_output(output: Path, format: str, task: str | None = None, all_tasks:
     in (an existing folder, a path ending in a slash, or a name without a suffix; created if need
     be); for every task, the folder (both default to OUTPUT/export).  A ``vtk`` export of every
     task also writes JOB.pvd, the collection ParaView opens as one series.  ``voxel_size`` and
-    ``height`` are those of format ``voxels`` (:mod:`parsim.output.voxels`), ``wavelength`` and ``index`` (the
-    refractive index) those of format ``mstm`` (:mod:`parsim.output.mstm`).  Every task is checked
+    ``height`` are those of format ``voxels`` (:mod:`parsim.output.voxels`), ``wavelength`` and
+    ``refractive_index`` those of format ``mstm`` (:mod:`parsim.output.mstm`).  Every task is checked
     (the format's ``check``) before the folder is created: a refusal makes nothing.
     """
     if format not in FORMATS:
         raise JobError(f"unknown export format {format!r}; allowed: {', '.join(FORMATS)}")
     spec = FORMATS[format]
-    given = {"voxel_size": voxel_size, "height": height, "wavelength": wavelength, "index": index}
+    given = {"voxel_size": voxel_size, "height": height, "wavelength": wavelength,
+             "refractive_index": refractive_index}
     options = {name: value for name, value in given.items() if value is not None}
     stray = sorted(set(options) - set(FORMAT_OPTIONS.get(format, ())))
     if stray:
-        flags = ", ".join("--" + ("refractive-index" if name == "index" else name.replace("_", "-")) for name in stray)
+        flags = ", ".join("--" + name.replace("_", "-") for name in stray)
         owners = " and ".join(f"{name!r}" for name, names in FORMAT_OPTIONS.items() if set(stray) & set(names))
         raise JobError(f"{flags}: options of format {owners}, not {format!r}")
     if format == "voxels":
         spec = replace(spec, write=functools.partial(spec.write, **options),
                        check=functools.partial(spec.check, **options))
     elif format == "mstm":
-        check_options(wavelength, index)
-        spec = replace(spec, write=functools.partial(spec.write, wavelength=wavelength, index=index))
+        mstm.check_options(wavelength, refractive_index)
+        spec = replace(spec, write=functools.partial(spec.write, wavelength=wavelength, index=refractive_index))
     output = Path(output)
     job_name, files = _job_folder(output)
     if all_tasks:
@@ -490,7 +491,7 @@ def add_export_command(subparsers) -> None:
 
 def _refractive_index(text: str) -> complex:
     try:
-        return refractive_index(text)
+        return mstm.refractive_index(text)
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
 
@@ -499,6 +500,6 @@ def run_export(args: argparse.Namespace) -> int:
     """``parsim export``: write the files and print their paths; errors are one-line ParsimErrors."""
     for path in export_output(args.output, args.format, task=args.task, all_tasks=args.all, out=args.out,
                               voxel_size=args.voxel_size, height=args.height, wavelength=args.wavelength,
-                              index=args.refractive_index):
+                              refractive_index=args.refractive_index):
         print(path)
     return 0
