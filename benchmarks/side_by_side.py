@@ -1,6 +1,6 @@
 """Two checkouts of parsim side by side: the instructions each executes for one task of each method.
 
-    python benchmarks/side_by_side.py OLD_CHECKOUT NEW_CHECKOUT
+    python benchmarks/side_by_side.py OLD_CHECKOUT NEW_CHECKOUT [--workloads ed ts dep]
 
 A restructuring of the kernels must not slow them down, and on a shared 2-core machine the wall
 time of one task varies by 10-20 % from one run to the next: too much to see 2 %.  The count of
@@ -66,10 +66,10 @@ def instructions(checkout: Path, cache: Path, script: Path, kind: str, n: int) -
     return int(re.search(r"I\s+refs:\s+([\d,]+)", done.stderr).group(1).replace(",", ""))
 
 
-def compile_natively(checkout: Path, cache: Path, script: Path) -> None:
+def compile_natively(checkout: Path, cache: Path, script: Path, kinds: list[str]) -> None:
     env = {**os.environ, "XDG_CACHE_HOME": str(cache), "PYTHONPATH": str(checkout), "NUMBA_CPU_NAME": "generic",
            "NUMBA_CPU_FEATURES": ""}
-    for kind in WORKLOADS:
+    for kind in kinds:
         subprocess.run([sys.executable, str(script), str(checkout), kind, "0"], env=env, check=True)
 
 
@@ -77,15 +77,18 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("old", type=Path, help="a checkout of parsim (a git worktree of the older revision)")
     parser.add_argument("new", type=Path, help="another checkout")
+    parser.add_argument("--workloads", nargs="+", choices=list(WORKLOADS), default=list(WORKLOADS),
+                        help="the workloads to count (default: all)")
     options = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="parsim-side-by-side-") as folder:
         script = Path(folder) / "task.py"
         script.write_text(TASK)
         caches = {name: Path(folder) / f"cache-{name}" for name in ("old", "new")}
         for name in caches:
-            compile_natively(getattr(options, name).resolve(), caches[name], script)
+            compile_natively(getattr(options, name).resolve(), caches[name], script, options.workloads)
         print(f"{'workload':<28} {'old [10^9 instr.]':>18} {'new [10^9 instr.]':>18} {'new/old':>8}")
-        for kind, n in WORKLOADS.items():
+        for kind in options.workloads:
+            n = WORKLOADS[kind]
             net = {}
             for name in caches:
                 checkout = getattr(options, name).resolve()

@@ -23,7 +23,7 @@ def method_comparison(dataset: xr.Dataset) -> list[dict]:
     """One row per (n_spheres, volume_fraction): ensemble means of both methods and their differences.
 
     ``max dP/P_ED`` is the largest relative difference of the mean P(r) over r; ``mean abs D_x`` the
-    mean absolute x component of the orientation (2/pi = 0.64 for isotropic orientations in 2D).
+    mean absolute x component of the orientation (isotropic orientations give 2/pi = 0.64 in 2D, 1/2 in 3D).
     """
     if "method" not in dataset.dims or not {"ed", "ts"} <= set(named_values(dataset["method"])):
         raise ValueError("the dataset must have a 'method' dimension holding 'ed' and 'ts' (sweep method)")
