@@ -507,11 +507,19 @@ class _RankRun:
         """Rounds in the jitted loop from ``frontier`` until it needs Python; returns its outcome and
         particle."""
         prep = self.prep
-        (outcome, particle, self.grid, self.centre, self.radius, self.key, self.n_used, self.settled_end,
-         self.margin) = rounds.run_rounds(frontier, prep.kernel_inputs(), prep.kernel_settings(), self.rows, self.plan,
-                                          self.grid, self.centre, self.radius, self.key, self.n_used,
-                                          self.settled_end, self.link, self.counts, self.settles, self.clock)
+        outcome, particle, held = rounds.run_rounds(frontier, prep.kernel_inputs(), prep.kernel_settings(), self.rows,
+                                                    self.plan, self._held(), self.link, self.counts, self.settles,
+                                                    self.clock)
+        self._keep(held)
         return int(outcome), int(particle)
+
+    def _held(self):
+        """The local sediment as the kernels take it (:data:`.rounds.Held`)."""
+        return rounds.Held(self.grid, self.centre, self.radius, self.key, self.n_used, self.settled_end, self.margin)
+
+    def _keep(self, held):
+        """The local sediment a kernel returned becomes this block's."""
+        (self.grid, self.centre, self.radius, self.key, self.n_used, self.settled_end, self.margin) = held
 
     def compile_rare(self):
         """Compile, or load from the cache, the kernels that neither a small task nor one rank alone may call,
@@ -595,12 +603,10 @@ class _RankRun:
     def _insert(self, parcel, first_row):
         """Committed particles of other ranks (a :func:`_parcel`) join the local sediment; the present rows
         from ``first_row`` on that they touch are withdrawn."""
-        self.grid, self.centre, self.radius, self.key, self.n_used = rounds.insert_parcel(
-            *self._insert_arguments(parcel, first_row))
+        self._keep(rounds.insert_parcel(*self._insert_arguments(parcel, first_row)))
 
     def _insert_arguments(self, parcel, first_row):
-        return (*parcel, first_row, self.rows, self.grid, self.centre, self.radius, self.key, self.n_used,
-                self.settled_end, self.margin, self.n_max, self.settles)
+        return tuple(parcel), first_row, self.rows, self._held(), self.n_max, self.settles
 
     def _parcel(self, rows):
         """The spheres of ``rows`` as sent to another rank: counts, footprints, keys, wrapped centres, radii."""
@@ -625,7 +631,7 @@ class _RankRun:
                 for source, parcel in enumerate(parts):
                     if source != owner:  # the owner's own particles are in its sediment
                         self._insert(self._not_fetched(parcel), row)
-                self.grid, self.settled_end = rounds.settle_again(*self._settle_again_arguments(row))
+                self._keep(rounds.settle_again(*self._settle_again_arguments(row)))
                 box = self._widened(row, self.margin)
                 done = (blocks.interval_within(box[0], box[1], region[0], region[1], self.length[0], self.periodic)
                         or _box_within(box, extent, self.length, self.periodic))
@@ -636,8 +642,7 @@ class _RankRun:
 
     def _settle_again_arguments(self, row):
         prep = self.prep
-        return (row, prep.kernel_inputs(), prep.kernel_settings(), self.rows, self.plan, self.grid, self.centre,
-                self.radius, self.key, self.n_used, self.settled_end, self.margin, self.settles)
+        return row, prep.kernel_inputs(), prep.kernel_settings(), self.rows, self.plan, self._held(), self.settles
 
     def _widened(self, row, by):
         box = self.rows.rectangle[row]

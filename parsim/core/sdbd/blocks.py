@@ -41,7 +41,8 @@ import numpy as np
 
 from parsim.core.jit import jit
 from parsim.core.sdbd import reads as read_box
-from parsim.core.sdbd.bundles import Settings, grid_arrays, new_grid, new_particle, new_workspace, sediment_in
+from parsim.core.sdbd.bundles import (Settings, grid_arrays, new_grid, new_particle, new_workspace, sediment_in,
+                                     set_grid_arrays)
 from parsim.core.sdbd.constants import (
     EVENT_LIMIT,
     GEOM_CELL,
@@ -112,11 +113,10 @@ def withdraw(row, rows, centre, radius, grid_state, now):
     """Take row ``row`` (present or stopped) out of the local sediment at ``now`` (the rank's count
     of descents, kept in ``rows.withdrawn_at``): a present row becomes WITHDRAWN (its slots keep
     its old centres, out of the grid, for :func:`settle_rows` to compare), a stopped one ABSENT."""
-    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_state
     status = rows.status
     if status[row] == PRESENT:
         for j in range(rows.slot[row], rows.slot[row] + rows.count[row]):
-            grid_remove(geom, igeom, head, col_top, nxt, hkeys, hval, j, centre[j, 0], centre[j, 1], centre[j, 2])
+            grid_remove(grid_state, j, (centre[j, 0], centre[j, 1], centre[j, 2]))
             radius[j] = 0.0  # out of the grid: not rebuilt into it
         status[row] = WITHDRAWN
         rows.withdrawn_at[row] = now
@@ -149,18 +149,23 @@ def _withdraw_met(first, last, box, by_footprint, rows, centre, radius, grid_sta
 
 
 @jit
-def insert_committed(n_particles, particle_count, particle_footprint, sphere_key, sphere_centre, sphere_radius,
-                     first_slot, centre, radius, key, grid_state, first_row, last_row, rows, margin, now):
-    """Committed particles of other ranks join the local sediment in slots from ``first_slot`` on:
-    particle ``k`` has ``particle_count[k]`` spheres (keys, wrapped centres, radii in the next rows
-    of ``sphere_*``) and footprint ``particle_footprint[k]``.  The present or stopped rows in
-    ``first_row .. last_row - 1`` whose rectangle widened by ``margin`` meets one of the footprints
-    are withdrawn first (at ``now``, a count of descents).  Returns the grid's arrays."""
+def insert_committed(parcel, first_slot, local, first_row, rows, now):
+    """Committed particles of other ranks, ``parcel = (particle_count, particle_footprint, sphere_key,
+    sphere_centre, sphere_radius)``, join the local sediment ``local`` (:data:`.rounds.Local`) in slots
+    from ``first_slot`` on: particle ``k`` has ``particle_count[k]`` spheres (keys, wrapped centres,
+    radii in the next rows of ``sphere_*``) and footprint ``particle_footprint[k]``.  The present or
+    stopped rows in ``first_row .. local.settled_end - 1`` whose rectangle widened by ``local.margin``
+    meets one of the footprints are withdrawn first (at ``now``, a count of descents).  The grid's
+    arrays grow as they must."""
+    particle_count, particle_footprint, sphere_key, sphere_centre, sphere_radius = parcel
+    n_particles = particle_count.shape[0]
+    centre, radius, key, margin = local.centre, local.radius, local.key, local.margin
+    grid_state = grid_arrays(local.grid)
     geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
     status, rectangle = rows.status, rows.rectangle
     periodic = igeom[IGEOM_MODE] == LATERAL_PERIODIC
     marked, origin, width = mark_strips(particle_footprint, n_particles, 0.0, geom[GEOM_LENGTH_X], periodic)
-    for o in range(first_row, last_row):
+    for o in range(first_row, local.settled_end):
         if status[o] != PRESENT and status[o] != STOPPED:
             continue
         box = rectangle[o]
@@ -168,7 +173,7 @@ def insert_committed(n_particles, particle_count, particle_footprint, sphere_key
             continue
         for k in range(n_particles):
             if box_meets(box, particle_footprint[k], margin, geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y], periodic):
-                withdraw(o, rows, centre, radius, (geom, igeom, head, col_top, nxt, hkeys, hval, counts), now)
+                withdraw(o, rows, centre, radius, grid_state, now)
                 break
     j = first_slot
     for s in range(len(sphere_radius)):
@@ -176,10 +181,10 @@ def insert_committed(n_particles, particle_count, particle_footprint, sphere_key
             centre[j, d] = sphere_centre[s, d]
         radius[j] = sphere_radius[s]
         key[j] = sphere_key[s]
-        head, col_top, hkeys, hval = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts,
-                                                         j, centre[j, 0], centre[j, 1], centre[j, 2], key)
+        head, col_top, hkeys, hval = grid_insert_ordered((geom, igeom, head, col_top, nxt, hkeys, hval, counts),
+                                                         j, (centre[j, 0], centre[j, 1], centre[j, 2]), key)
         j += 1
-    return geom, igeom, head, col_top, nxt, hkeys, hval, counts
+    set_grid_arrays(local.grid, geom, igeom, head, col_top, nxt, hkeys, hval, counts)
 
 
 #: One rank's rows (its particles in drop order) and what settling them gave: their places in the drop
@@ -205,21 +210,22 @@ def new_scratch(n_max):
 
 
 @jit
-def settle_rows(scratch, buf, first, last, settled_end, particles, settings, rows, grid, centre, radius, key, margin,
-                settles, given_top):
+def settle_rows(local, first, last, particles, settings, rows, settles, given_top):
     """Settle the absent rows among ``first .. last - 1`` in drop order (row ``o``'s inputs are entry
     ``o`` of the ``particles`` arrays: ``shape_offsets, shape_radii, shape_start, particle_shape,
-    particle_scale, particle_rotation, particle_drop_xy``), keeping the invariant of the module docs;
-    rows from ``settled_end`` on were never settled.  ``settings``: ``floor_mode, wall_contact,
-    trial_angle, cycle_n, cycle_eps, max_events, ell``; ``grid`` the local sediment's
-    :class:`.bundles.Grid` (its arrays may be replaced as the pile grows).  Each writes its results into ``rows``
-    (:class:`Rows`; its spheres from ``spheres[sphere_row[o]]`` on, as the particle holds them, a periodic
-    box's beyond it included), its footprint and its rectangle, and its :func:`read_signature` when
-    ``rows.signatures`` has rows; ``settles[0]`` counts the descents.  ``scratch`` is a
-    :func:`new_scratch`, ``buf`` a query buffer.  ``given_top``: see :func:`_settle`.  Returns the
-    query buffer (a new one if it had to grow)."""
-    particle, work, history, trace = scratch
-    offsets, radii, start, shape, scale, rotation, drop_xy = particles
+    particle_scale, particle_rotation, particle_drop_xy``), keeping the invariant of the module docs,
+    on the rank's local sediment ``local`` (:data:`.rounds.Local`: its grid, whose arrays may be
+    replaced as the pile grows, its slots' centres, radii and keys, the round's margin, the scratch
+    and query buffer to work in); rows from ``local.settled_end`` on were never settled.
+    ``settings``: ``floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell``.
+    Each writes its results into ``rows`` (:class:`Rows`; its spheres from ``spheres[sphere_row[o]]``
+    on, as the particle holds them, a periodic box's beyond it included), its footprint and its
+    rectangle, and its :func:`read_signature` when ``rows.signatures`` has rows; ``settles[0]`` counts
+    the descents.  ``given_top``: see :func:`_settle`.  ``local.buf`` becomes a larger buffer if the
+    queries needed one."""
+    scratch, buf, settled_end, margin = local.scratch, local.buf, local.settled_end, local.margin
+    grid, centre, radius, key = local.grid, local.centre, local.radius, local.key
+    particle, work, _, _ = scratch
     floor_mode, wall_contact, trial_angle, cycle_n, cycle_eps, max_events, ell = settings
     virtual_angle = trial_angle if trial_angle > 0.0 else VIRTUAL_ANGLE
     descent = Settings(floor_mode, trial_angle, virtual_angle, cycle_n, cycle_eps, max_events, ell,
@@ -234,9 +240,8 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
         later = max(settled_end, o + 1)
         while True:
             settles[0] += 1
-            n, state, n_c, steps, chunks, buf = _settle(o, offsets, radii, start, shape, scale, rotation, drop_xy,
-                                                        sediment, grid, ell, particle, work, history, descent,
-                                                        rows.events[o], trace, buf, periodic, given_top)
+            n, state, n_c, steps, chunks, buf = _settle(o, particles, sediment, grid, ell, scratch, descent,
+                                                        rows.events[o], buf, periodic, given_top)
             # later rows were not there in the serial run: settle again without those it read
             if later == o + 1 or not _withdraw_met(o + 1, later, work.reads, True, rows, centre, radius,
                                                    grid_arrays(grid), margin, settles[0], -1):
@@ -264,8 +269,7 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
             footprint[o, 3] = -math.inf
         else:
             moved = was != WITHDRAWN or not _same_spheres(n, particle, centre, slot[o], grid.geom, grid.igeom)
-            _freeze_row(o, n, particle, n_c, sediment, grid, key, slot[o], rows.first_key[o], rows.com,
-                        rows.rotation, rows.contacts, rows.spheres, rows.sphere_row[o], footprint)
+            _freeze_row(o, n, particle, n_c, sediment, grid, key, rows)
             status[o] = PRESENT
         # later rows settled while this one was elsewhere read what changed; back where it was, it
         # changes nothing for those settled before it was withdrawn, but those settled since did
@@ -278,22 +282,21 @@ def settle_rows(scratch, buf, first, last, settled_end, particles, settings, row
                 _withdraw_met(o + 1, later, footprint[o], False, rows, centre, radius, grid_arrays(grid), margin,
                               settles[0], -1 if moved else rows.withdrawn_at[o])
         settled_end = later
-    return buf
+    local.buf = buf
 
 
 @jit(inline="always")  # a call would reference-count its dozen arrays and bundles, per particle
-def _settle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation,
-            particle_drop_xy, sediment, grid, ell, particle, work, history, settings, events, trace, buf, periodic,
-            given_top):
-    """Drop particle ``p`` and let it descend as the serial loop does (:func:`.engine.run_deposition`);
-    its rectangle is in ``work.reads``.  A particle with a sphere larger than any before is dropped
-    at ``given_top`` (:func:`drop_top`, on the grid before it grew), else ``given_top`` is NaN.
-    Returns ``(n, state, n_c, steps, chunk_ends, buf)``."""
+def _settle(p, particles, sediment, grid, ell, scratch, settings, events, buf, periodic, given_top):
+    """Drop particle ``p`` (its inputs in ``particles``, :func:`.particle.drop_particle`) and let it
+    descend as the serial loop does (:func:`.engine.run_deposition`) in the :func:`new_scratch`
+    ``scratch``; its rectangle is in the workspace's ``reads``.  A particle with a sphere larger than any
+    before is dropped at ``given_top`` (:func:`drop_top`, on the grid before it grew), else ``given_top``
+    is NaN.  Returns ``(n, state, n_c, steps, chunk_ends, buf)``."""
+    particle, work, history, trace = scratch
     for k in range(events.shape[0]):
         events[k] = 0
     read_box.forget(work.reads)
-    n, _ = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                         particle_rotation, particle_drop_xy, sediment, grid, ell, particle, work.reads, given_top)
+    n, _ = drop_particle(p, particles, sediment, grid, ell, particle, work.reads, given_top)
     if largest_diameter(n, particle) > grid.geom[GEOM_CELL]:
         raise ValueError("a particle larger than the grid's cell: grow the grid first (drop_top)")
     state, n_c, steps, chunk_ends, _, buf = _descend(n, particle, work, history, sediment, grid, settings, events,
@@ -319,10 +322,12 @@ def _same_spheres(n, particle, centre, first_slot, geom, igeom):
 
 
 @jit(inline="always")
-def _freeze_row(o, n, particle, n_c, sediment, grid, key, first_slot, first_key, out_com, out_rot, out_contacts,
-                out_sphere, sphere_row, footprint):
-    """Row ``o``'s particle of ``n`` spheres at rest joins the local sediment (slots from
-    ``first_slot``, keys from ``first_key``) and its results are written."""
+def _freeze_row(o, n, particle, n_c, sediment, grid, key, rows):
+    """Row ``o``'s particle of ``n`` spheres at rest, with ``n_c`` contacts, joins the local sediment
+    (slots from ``rows.slot[o]``, keys from ``rows.first_key[o]``) and its results are written into
+    ``rows`` (:class:`Rows`): footprint, centre of mass, orientation, contacts and sphere centres."""
+    first_slot, first_key, sphere_row = rows.slot[o], rows.first_key[o], rows.sphere_row[o]
+    out_sphere, footprint = rows.spheres, rows.footprint
     x_low = y_low = math.inf
     x_high = y_high = -math.inf
     for i in range(n):
@@ -341,21 +346,24 @@ def _freeze_row(o, n, particle, n_c, sediment, grid, key, first_slot, first_key,
     footprint[o, 2] = y_low
     footprint[o, 3] = y_high
     for d in range(3):
-        out_com[o, d] = particle.com[d]
-    matrix_to_quat(particle.rotation, out_rot[o])
-    out_contacts[o] = n_c
+        rows.com[o, d] = particle.com[d]
+    matrix_to_quat(particle.rotation, rows.rotation[o])
+    rows.contacts[o] = n_c
 
 
 @jit
-def first_failure(first, last, index, status, rectangle, region, other_index, other_footprint, n_other, margin,
-                  length_x, length_y, periodic):
-    """The first of rows ``first .. last - 1`` (settled) that cannot be committed once every particle
-    before it is, as ``index * N_FAILURES + reason``, or -1: FAIL_REGION if its rectangle widened by
-    ``margin`` leaves the ``region`` (x_low, x_high) whose committed sediment this rank holds,
-    FAIL_CONFLICT if a particle of another rank dropped after the rows committed so far and before it
-    (``other_index``, ``other_footprint``, sorted by index) has a sphere there, FAIL_STOPPED if it
-    stopped at the event limit.  Others' particles dropped before it meet its rectangle only if their
-    footprint meets the region: they are all listed."""
+def first_failure(first, last, rows, region, others, margin, length, periodic):
+    """The first of rows ``first .. last - 1`` of ``rows`` (:class:`Rows`, settled) that cannot be committed
+    once every particle before it is, as ``index * N_FAILURES + reason``, or -1: FAIL_REGION if its
+    rectangle widened by ``margin`` leaves the ``region`` (x_low, x_high) whose committed sediment this
+    rank holds, FAIL_CONFLICT if a particle of another rank dropped after the rows committed so far and
+    before it has a sphere there, FAIL_STOPPED if it stopped at the event limit.  ``others`` lists the
+    other ranks' particles, sorted by index: ``(other_index, other_footprint, n_other)``.  Others'
+    particles dropped before it meet its rectangle only if their footprint meets the region: they are
+    all listed.  ``length`` is the box's lateral (x, y), ``periodic`` whether it wraps."""
+    index, status, rectangle = rows.index, rows.status, rows.rectangle
+    other_index, other_footprint, n_other = others
+    length_x, length_y = length[0], length[1]
     marked, origin, width = mark_strips(other_footprint, n_other, margin, length_x, periodic)
     start = 0
     for o in range(first, last):
@@ -435,8 +443,8 @@ def read_signature(box, margin, below_key, grid_state, centre, key):
     geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_state
     periodic = igeom[IGEOM_MODE] == LATERAL_PERIODIC
     buf = np.empty(1024, dtype=np.int64)
-    n, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval, box[0] - margin, box[1] + margin,
-                                  box[2] - margin, box[3] + margin, 0.0, (head.shape[0] + 1) * geom[GEOM_CELL], buf)
+    n, buf = grid_collect_growing(grid_state, (box[0] - margin, box[2] - margin, 0.0),
+                                  (box[1] + margin, box[3] + margin, (head.shape[0] + 1) * geom[GEOM_CELL]), buf)
     count = 0
     digest = np.uint64(0)
     bits = centre.view(np.uint64)
@@ -485,13 +493,11 @@ def first_changed(first, last, signatures, rectangle, margin, first_key, status,
 
 
 @jit
-def drop_top(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation,
-             particle_drop_xy, grid_state, centre, radius, ell, n_max):
+def drop_top(p, particles, grid_state, centre, radius, ell, n_max):
     """The height above which particle ``p`` is dropped (:func:`.particle.drop_particle`) on this grid:
     for a particle with a sphere larger than any before, taken before the grid grows (the serial
     run drops it, then grows the grid's cell)."""
     particle = new_particle(n_max)
-    _, top = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                           particle_rotation, particle_drop_xy, sediment_in(centre, radius), new_grid(*grid_state),
-                           ell, particle, np.empty(0), math.nan)
+    _, top = drop_particle(p, particles, sediment_in(centre, radius), new_grid(*grid_state), ell, particle,
+                           np.empty(0), math.nan)
     return top

@@ -198,7 +198,8 @@ def near_contacts(n, particle, n_c, contacts, sediment, grid, walls, ell, buf, n
     rad = particle.radius
     sed = sediment.centre
     sed_r = sediment.radius
-    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
+    grid_state = grid_arrays(grid)
+    geom, igeom = grid.geom, grid.igeom
     added = 0
     floor_added = False
     lim = CYCLE_CLOSE_GAP * ell
@@ -206,9 +207,8 @@ def near_contacts(n, particle, n_c, contacts, sediment, grid, walls, ell, buf, n
         if n_c >= MAX_CONTACTS:
             break
         reach = rad[i] + 0.5 * geom[GEOM_CELL] + lim
-        cnt, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval,
-                                        pos[i, 0] - reach, pos[i, 0] + reach, pos[i, 1] - reach,
-                                        pos[i, 1] + reach, pos[i, 2] - reach, pos[i, 2] + reach, buf)
+        cnt, buf = grid_collect_growing(grid_state, (pos[i, 0] - reach, pos[i, 1] - reach, pos[i, 2] - reach),
+                                        (pos[i, 0] + reach, pos[i, 1] + reach, pos[i, 2] + reach), buf)
         for q in range(cnt):
             j = buf[q]
             rx = sed[j, 0] - pos[i, 0]

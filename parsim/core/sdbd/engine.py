@@ -231,13 +231,14 @@ def run_deposition(drops, substrate, grid_state, options, diagnosis, sediment_sp
     n_chunk_ends = 0
     stopped_at = -1
     clock_start = 0.0
+    particles = (shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation,
+                 particle_drop_xy)
     for p in range(n_part):
         if p == clock_from:
             clock_start = _wall_clock()
         started = counters.start(tallies)
         reads.forget(work.reads)
-        n, _ = drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                             particle_rotation, particle_drop_xy, sediment, grid, ell, particle, work.reads, math.nan)
+        n, _ = drop_particle(p, particles, sediment, grid, ell, particle, work.reads, math.nan)
         _fit_grid(n, particle, sediment, n_sed, grid)
         counters.stop(tallies, counters.PARTICLE, started)
         state, n_c, steps, chunk_ends, overlap, buf = _descend(
@@ -421,8 +422,8 @@ def regrid(grid, cell, centre, order):
         grid.igeom[IGEOM_MODE], geom[GEOM_LOWER_X], geom[GEOM_LOWER_Y], geom[GEOM_LENGTH_X], geom[GEOM_LENGTH_Y], cell, 1, geom[GEOM_CONTAINER:], grid.igeom[IGEOM_SIDES])
     nxt = grid.nxt
     for j in order:
-        head, col_top, hkeys, hval = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j,
-                                                 centre[j, 0], centre[j, 1], centre[j, 2])
+        head, col_top, hkeys, hval = grid_insert((geom, igeom, head, col_top, nxt, hkeys, hval, counts), j,
+                                                 (centre[j, 0], centre[j, 1], centre[j, 2]))
     set_grid_arrays(grid, geom, igeom, head, col_top, nxt, hkeys, hval, counts)
 
 
@@ -454,16 +455,17 @@ def join_sediment(j, x, y, z, r, sediment, grid, key):
     """Sphere ``j`` (centre ``x, y, z`` wrapped into a periodic box, radius ``r``) joins the
     sediment and the grid: the newest of its cell, or with ``key`` (not empty) in the order of
     the keys (:func:`.grid.grid_insert_ordered`).  Returns its wrapped ``x, y``."""
-    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_arrays(grid)
+    grid_state = grid_arrays(grid)
+    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
     wx, wy = wrap_position(geom, igeom, x, y)
     sediment.centre[j, 0] = wx
     sediment.centre[j, 1] = wy
     sediment.centre[j, 2] = z
     sediment.radius[j] = r
     if key.shape[0]:
-        grown = grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy, z, key)
+        grown = grid_insert_ordered(grid_state, j, (wx, wy, z), key)
     else:
-        grown = grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, wx, wy, z)
+        grown = grid_insert(grid_state, j, (wx, wy, z))
     # the grid's arrays grow with the pile
     if (grown[0].ctypes.data != head.ctypes.data or grown[1].ctypes.data != col_top.ctypes.data
             or grown[2].ctypes.data != hkeys.ctypes.data or grown[3].ctypes.data != hval.ctypes.data):

@@ -92,7 +92,7 @@ def fall_events(n, particle, sediment, grid, ell, window, counters):
     n_t = 0
     for i in range(n):
         d = pos[i, 2] - rad[i]
-        n_t, best = push_event(n_t, best, tolz, d, 1.0, 0.0, EV_CONTACT, i, OB_FLOOR, -1, 0.0, 0.0, window)
+        n_t, best = push_event(n_t, best, tolz, (d, 1.0, 0.0), EV_CONTACT, (i, OB_FLOOR, -1, 0.0, 0.0), window)
     for i in range(n):
         reach = rad[i] + r_max_sed
         xi = pos[i, 0]
@@ -129,8 +129,8 @@ def fall_events(n, particle, sediment, grid, ell, window, counters):
                             if dz < np.inf and dz >= -TOUCH_TOL * ell:
                                 if dz < 0.0:
                                     dz = 0.0
-                                n_t, best = push_event(n_t, best, tolz, dz, 1.0, 0.0, EV_CONTACT,
-                                                       i, OB_SPHERE, j, mx - rx, my - ry, window)
+                                n_t, best = push_event(n_t, best, tolz, (dz, 1.0, 0.0),
+                                                       EV_CONTACT, (i, OB_SPHERE, j, mx - rx, my - ry), window)
                             j = nxt[j]
                         iz -= 1
     return n_t, best, tolz

@@ -248,22 +248,25 @@ def _new_column(igeom, head, col_top, hkeys, hval, counts, ix, iy):
 
 
 @jit
-def grid_insert(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, x, y, z):
-    """Add sphere ``j`` with (wrapped) centre ``x, y, z`` at the head of its cell's list (the newest
-    sphere first); returns the possibly grown arrays ``(head, col_top, hkeys, hval)``."""
-    col, iz, head, col_top, hkeys, hval = _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, x, y, z)
+def grid_insert(grid_state, j, point):
+    """Add sphere ``j`` with (wrapped) centre ``point = (x, y, z)`` at the head of its cell's list (the
+    newest sphere first) in the grid of state arrays ``grid_state`` (:func:`empty_grid`'s tuple);
+    returns the possibly grown arrays ``(head, col_top, hkeys, hval)``."""
+    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
+    col, iz, head, col_top, hkeys, hval = _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, point)
     nxt[j] = head[iz, col]
     head[iz, col] = j
     return head, col_top, hkeys, hval
 
 
 @jit
-def grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j, x, y, z, key):
+def grid_insert_ordered(grid_state, j, point, key):
     """:func:`grid_insert` for spheres that arrive out of order: sphere ``j`` goes into its cell's
     list before the first sphere of smaller ``key``, so that every list runs in decreasing ``key``
     whatever the order of insertion (a list filled in increasing ``key`` by :func:`grid_insert`
     is the same list)."""
-    col, iz, head, col_top, hkeys, hval = _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, x, y, z)
+    geom, igeom, head, col_top, nxt, hkeys, hval, counts = grid_state
+    col, iz, head, col_top, hkeys, hval = _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, point)
     before = -1
     k = head[iz, col]
     while k >= 0 and key[k] > key[j]:
@@ -278,9 +281,11 @@ def grid_insert_ordered(geom, igeom, head, col_top, nxt, hkeys, hval, counts, j,
 
 
 @jit
-def grid_remove(geom, igeom, head, col_top, nxt, hkeys, hval, j, x, y, z):
-    """Take sphere ``j`` (centre ``x, y, z`` as inserted) out of its cell's list; the column's top
-    layer comes down to the highest layer still holding a sphere, as if ``j`` had never been in."""
+def grid_remove(grid_state, j, point):
+    """Take sphere ``j`` (centre ``point = (x, y, z)`` as inserted) out of its cell's list; the column's
+    top layer comes down to the highest layer still holding a sphere, as if ``j`` had never been in."""
+    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_state
+    x, y, z = point
     ix, iy = _clamped_column_index(geom, igeom, x, y)
     col = column_lookup(igeom, hkeys, hval, ix, iy)
     iz = max(int(math.floor(z / geom[GEOM_CELL])), 0)
@@ -311,9 +316,10 @@ def _clamped_column_index(geom, igeom, x, y):
 
 
 @jit(inline="always")
-def _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, x, y, z):
-    """The cell ``(col, iz)`` of a centre, its column created and its layer allocated if new, the
-    column's top raised to it; returns ``(col, iz, head, col_top, hkeys, hval)``, possibly grown."""
+def _cell_of(geom, igeom, head, col_top, hkeys, hval, counts, point):
+    """The cell ``(col, iz)`` of a centre ``point``, its column created and its layer allocated if new,
+    the column's top raised to it; returns ``(col, iz, head, col_top, hkeys, hval)``, possibly grown."""
+    x, y, z = point
     ix, iy = _clamped_column_index(geom, igeom, x, y)
     col = column_lookup(igeom, hkeys, hval, ix, iy)
     if col < 0:
@@ -404,14 +410,19 @@ def column_range(geom, igeom, x0, x1, y0, y1):
 
 
 @jit
-def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z0, z1, buf):
-    """Indices of the spheres whose cells meet the box ``[x0,x1] x [y0,y1] x [z0,z1]``.
+def grid_collect(grid_state, lower, upper, buf):
+    """Indices of the spheres whose cells meet the box from ``lower = (x0, y0, z0)`` to
+    ``upper = (x1, y1, z1)``, in the grid of state arrays ``grid_state`` (the tuple of
+    :func:`empty_grid`, or :func:`.bundles.grid_arrays` of a grid bundle).
 
     Writes them into ``buf`` and returns their number, or ``-1`` if ``buf`` is too small
     (:func:`grid_collect_growing` grows it and asks again).  Each sphere is listed once
     even when a periodic query box is wider than the box itself; the caller applies
     minimum images.
     """
+    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_state
+    x0, y0, z0 = lower
+    x1, y1, z1 = upper
     ix0, ix1, iy0, iy1 = column_range(geom, igeom, x0, x1, y0, y1)
     iz0 = int(math.floor(z0 / geom[GEOM_CELL]))
     if iz0 < 0:
@@ -451,11 +462,11 @@ def grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z
 
 
 @jit
-def grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z0, z1, buf):
+def grid_collect_growing(grid_state, lower, upper, buf):
     """:func:`grid_collect` with a buffer that is doubled until it holds them all;
     returns ``(count, buf)``."""
     while True:
-        cnt = grid_collect(geom, igeom, head, col_top, nxt, hkeys, hval, x0, x1, y0, y1, z0, z1, buf)
+        cnt = grid_collect(grid_state, lower, upper, buf)
         if cnt >= 0:
             return cnt, buf
         buf = np.empty(2 * buf.shape[0], dtype=np.int64)

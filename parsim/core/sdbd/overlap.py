@@ -22,13 +22,13 @@ def max_overlap(n, particle, sediment, grid, lateral_walls, buf):
     rad = particle.radius
     sed = sediment.centre
     sed_r = sediment.radius
-    geom, igeom, head, col_top, nxt, hkeys, hval, _ = grid_arrays(grid)
+    grid_state = grid_arrays(grid)
+    geom, igeom = grid.geom, grid.igeom
     worst = -np.inf
     for i in range(n):
         reach = rad[i] + 0.5 * geom[GEOM_CELL]
-        cnt, buf = grid_collect_growing(geom, igeom, head, col_top, nxt, hkeys, hval,
-                                        pos[i, 0] - reach, pos[i, 0] + reach, pos[i, 1] - reach,
-                                        pos[i, 1] + reach, pos[i, 2] - reach, pos[i, 2] + reach, buf)
+        cnt, buf = grid_collect_growing(grid_state, (pos[i, 0] - reach, pos[i, 1] - reach, pos[i, 2] - reach),
+                                        (pos[i, 0] + reach, pos[i, 1] + reach, pos[i, 2] + reach), buf)
         for q in range(cnt):
             j = buf[q]
             dx, dy = min_image(geom, igeom, sed[j, 0] - pos[i, 0], sed[j, 1] - pos[i, 1])

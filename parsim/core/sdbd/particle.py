@@ -34,15 +34,21 @@ def place_spheres(n, particle):
 
 
 @jit
-def drop_particle(p, shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
-                  particle_rotation, particle_drop_xy, sediment, grid, ell, particle, reads, given_top):
+def drop_particle(p, particles, sediment, grid, ell, particle, reads, given_top):
     """Particle ``p`` at its drop: scaled body offsets and radii, orientation (from
     ``particle_rotation[p]``, any non-zero quaternion), centre of mass above its drop point
     with its lowest sphere ``DROP_MARGIN`` above the sediment within its reach
     (:func:`.grid.top_near`: the particle's extent plus the largest sediment radius, or
     ``given_top`` unless it is NaN); returns its number of spheres and that height; the square it
     read joins ``reads`` (:mod:`.reads`).  The sediment beyond that reach, which the vertical fall cannot
-    touch, does not change the drop, nor therefore the particle's descent."""
+    touch, does not change the drop, nor therefore the particle's descent.
+
+    ``particles`` holds every particle's inputs: ``(shape_offsets, shape_radii, shape_start,
+    particle_shape, particle_scale, particle_rotation, particle_drop_xy)``, the shapes' sphere offsets
+    and radii (shape ``s`` is rows ``shape_start[s] .. shape_start[s + 1] - 1``) and each particle's
+    shape, scale, quaternion and drop point."""
+    shape_offsets, shape_radii, shape_start, particle_shape, particle_scale, particle_rotation, particle_drop_xy = \
+        particles
     body = particle.body
     rad = particle.radius
     q = particle.quaternion

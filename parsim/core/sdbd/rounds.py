@@ -37,7 +37,7 @@ from parsim.core.sdbd.blocks import (FAIL_CONFLICT, FAIL_REGION, FINAL, N_FAILUR
 from parsim.core.sdbd.bundles import bundle, grid_arrays, new_grid, set_grid_arrays
 from parsim.core.sdbd.engine import regrid
 
-__all__ = ["Plan", "run_rounds", "settle_again", "insert_parcel", "DONE", "LEFT_REGION", "STOPPED_AT_LIMIT",
+__all__ = ["Plan", "Held", "run_rounds", "settle_again", "insert_parcel", "DONE", "LEFT_REGION", "STOPPED_AT_LIMIT",
            "READ_CHANGED", "ROUNDS", "CONFLICTS", "ROUND_SECONDS", "SETTLE_SECONDS", "IDLE_SECONDS", "FOOTPRINT_BYTES",
            "HALO_BYTES", "HALO_PARTICLES", "N_TALLIES"]
 
@@ -76,30 +76,43 @@ Plan = namedtuple("Plan", ["n_particles", "window", "growth_at", "cell", "side",
 #: and updates in place, as the serial loop does.
 Local = bundle("Local", ["grid", "centre", "radius", "key", "n_used", "settled_end", "margin", "scratch", "buf"])
 
-
-@jit
-def _local(grid, centre, radius, key, n_used, settled_end, margin, n_max):
-    """The :data:`Local` bundle over the caller's local sediment (``grid`` its arrays), with a new scratch for
-    particles of up to ``n_max`` spheres and a new query buffer."""
-    return Local(new_grid(*grid), centre, radius, key, n_used, settled_end, margin, new_scratch(n_max),
-                 np.empty(4096, dtype=np.int64))
+#: The local sediment as the caller keeps it between kernel calls: the grid's state arrays (the tuple of
+#: :func:`.grid.empty_grid`), the slots' centres, radii and keys (the first ``n_used`` in use), the rows
+#: settled so far and the margin of the last round.  The kernels take it and return it, its arrays
+#: possibly replaced as they grew.
+Held = namedtuple("Held", ["grid", "centre", "radius", "key", "n_used", "settled_end", "margin"])
 
 
 @jit
-def run_rounds(frontier, particles, settings, rows, plan, grid, centre, radius, key, n_used, settled_end, link,
-               tally, settles, clock):
+def _local(held, n_max):
+    """The :data:`Local` bundle over the caller's local sediment ``held`` (a :data:`Held`), with a new
+    scratch for particles of up to ``n_max`` spheres and a new query buffer."""
+    return Local(new_grid(*held.grid), held.centre, held.radius, held.key, held.n_used, held.settled_end,
+                 held.margin, new_scratch(n_max), np.empty(4096, dtype=np.int64))
+
+
+@jit
+def _held(local):
+    """The :data:`Held` of a :data:`Local` bundle, for the caller."""
+    return Held(local.grid.memory, local.centre, local.radius, local.key, local.n_used, local.settled_end,
+                local.margin)
+
+
+@jit
+def run_rounds(frontier, particles, settings, rows, plan, held, link, tally, settles, clock):
     """Rounds from ``frontier`` (every particle before it committed on every rank) until every
     particle is committed or one needs the caller.  Collective over the link's ranks.
 
     ``particles`` and ``settings`` are those of :func:`.blocks.settle_rows`, ``rows`` the rank's
-    :class:`.blocks.Rows`, ``plan`` a :class:`Plan`; ``grid, centre, radius, key, n_used`` the local
-    sediment, ``settled_end`` the rows settled so far; ``link`` a :mod:`.kernel_mpi` link over the
+    :class:`.blocks.Rows`, ``plan`` a :class:`Plan`; ``held`` the local sediment (a :data:`Held`);
+    ``link`` a :mod:`.kernel_mpi` link over the
     group; ``tally`` (N_TALLIES) and ``settles`` (the descents) count; ``clock[0]`` receives the
     :func:`.kernel_mpi.now` at which the round that committed particle ``plan.clock_from`` began.
-    Returns ``(outcome, particle, grid, centre, radius, key, n_used, settled_end, margin)``:
+    Returns ``(outcome, particle, held)``, ``held`` the local sediment now:
     DONE (particle: the number of particles), LEFT_REGION, STOPPED_AT_LIMIT or READ_CHANGED
     (particle: the one concerned, every particle before it committed)."""
-    local = _local(grid, centre, radius, key, n_used, settled_end, 0.0, plan.n_max)
+    local = _local(held, plan.n_max)
+    local.margin = 0.0
     if plan.jitter > 0.0:
         np.random.seed(plan.jitter_seed + frontier)
     outcome = DONE
@@ -109,8 +122,7 @@ def run_rounds(frontier, particles, settings, rows, plan, grid, centre, radius, 
         tally[ROUND_SECONDS] += kernel_mpi.now() - started
         if outcome != DONE:
             break
-    return (outcome, frontier, local.grid.memory, local.centre, local.radius, local.key, local.n_used,
-            local.settled_end, local.margin)
+    return outcome, frontier, _held(local)
 
 
 @jit
@@ -129,9 +141,8 @@ def _round(frontier, local, particles, settings, rows, plan, link, tally, settle
                                                      rows, plan, link, tally, settles)
     mine = end * N_FAILURES
     if plan.region[0] <= plan.region[1]:  # a rank that owns no block has no rows
-        code = first_failure(first_row, last_row, rows.index, rows.status, rows.rectangle, plan.region, other_index,
-                             other_footprint, other_index.shape[0], local.margin, plan.length[0], plan.length[1],
-                             plan.periodic)
+        others = (other_index, other_footprint, other_index.shape[0])
+        code = first_failure(first_row, last_row, rows, plan.region, others, local.margin, plan.length, plan.periodic)
         if code >= 0:
             mine = code
     _jitter(plan, kernel_mpi.now())
@@ -173,12 +184,10 @@ def _settle_span(local, first_row, last_row, particles, settings, rows, plan, ta
     if last_row == first_row + 1:
         cell = _cell_after(plan, rows.index[first_row])
         if cell > local.grid.geom[GEOM_CELL]:
-            offsets, radii, start, shape, scale, rotation, drop_xy = particles
-            given_top = drop_top(first_row, offsets, radii, start, shape, scale, rotation, drop_xy,
-                                 grid_arrays(local.grid), local.centre, local.radius, settings[6], plan.n_max)
+            given_top = drop_top(first_row, particles, grid_arrays(local.grid), local.centre, local.radius,
+                                 settings[6], plan.n_max)
             _set_cell(local, cell)
-    local.buf = settle_rows(local.scratch, local.buf, first_row, last_row, local.settled_end, particles, settings,
-                            rows, local.grid, local.centre, local.radius, local.key, local.margin, settles, given_top)
+    settle_rows(local, first_row, last_row, particles, settings, rows, settles, given_top)
     local.settled_end = max(local.settled_end, last_row)
     tally[SETTLE_SECONDS] += kernel_mpi.now() - started
 
@@ -411,23 +420,21 @@ def _insert_packed(local, parcel, at, first_row, rows, settles):
             centres[j, d] = parcel[at + 1 + d]
         radii[j] = parcel[at + 4]
         at += SPHERE_WIDTH
-    _insert(local, counts, footprints, keys, centres, radii, first_row, rows, settles)
+    _insert(local, (counts, footprints, keys, centres, radii), first_row, rows, settles)
     return at
 
 
 @jit
-def _insert(local, counts, footprints, keys, centres, radii, first_row, rows, settles):
-    """Committed particles of other ranks (particle ``k`` has ``counts[k]`` spheres, the next of ``keys``,
-    ``centres`` (wrapped) and ``radii``, and footprint ``footprints[k]``) join the local sediment; the
-    present rows from ``first_row`` on whose rectangle meets one of them are withdrawn first (at the
-    count of descents ``settles[0]``)."""
+def _insert(local, parcel, first_row, rows, settles):
+    """Committed particles of other ranks, ``parcel = (counts, footprints, keys, centres, radii)`` (particle
+    ``k`` has ``counts[k]`` spheres, the next of ``keys``, ``centres`` (wrapped) and ``radii``, and footprint
+    ``footprints[k]``), join the local sediment; the present rows from ``first_row`` on whose rectangle
+    meets one of them are withdrawn first (at the count of descents ``settles[0]``)."""
+    counts, _, _, _, radii = parcel
     if counts.shape[0] == 0:
         return
     first = _reserve(local, radii.shape[0])
-    geom, igeom, head, col_top, nxt, hkeys, hval, grid_counts = insert_committed(
-        counts.shape[0], counts, footprints, keys, centres, radii, first, local.centre, local.radius, local.key,
-        grid_arrays(local.grid), first_row, local.settled_end, rows, local.margin, settles[0])
-    set_grid_arrays(local.grid, geom, igeom, head, col_top, nxt, hkeys, hval, grid_counts)
+    insert_committed(parcel, first, local, first_row, rows, settles[0])
 
 
 @jit
@@ -451,21 +458,20 @@ def _reserve(local, n_spheres):
 
 # ------------------------------------------------------------- the caller's steps (fetching)
 @jit
-def settle_again(row, particles, settings, rows, plan, grid, centre, radius, key, n_used, settled_end, margin,
-                 settles):
-    """Settle row ``row`` (its particle at the frontier) again on what the local sediment holds now, with
-    the grid's cell of its turn.  Returns ``(grid, settled_end)``."""
-    local = _local(grid, centre, radius, key, n_used, settled_end, margin, plan.n_max)
+def settle_again(row, particles, settings, rows, plan, held, settles):
+    """Settle row ``row`` (its particle at the frontier) again on what the local sediment ``held`` (a
+    :data:`Held`) holds now, with the grid's cell of its turn.  Returns the local sediment then."""
+    local = _local(held, plan.n_max)
     _set_cell(local, _cell_after(plan, rows.index[row] - 1))
     withdraw(row, rows, local.centre, local.radius, grid_arrays(local.grid), settles[0])
     _settle_span(local, row, row + 1, particles, settings, rows, plan, np.zeros(N_TALLIES), settles)
-    return local.grid.memory, local.settled_end
+    return _held(local)
 
 
 @jit
-def insert_parcel(counts, footprints, keys, centres, radii, first_row, rows, grid, centre, radius, key, n_used,
-                  settled_end, margin, n_max, settles):
-    """:func:`_insert` from the caller.  Returns ``(grid, centre, radius, key, n_used)``."""
-    local = _local(grid, centre, radius, key, n_used, settled_end, margin, n_max)
-    _insert(local, counts, footprints, keys, centres, radii, first_row, rows, settles)
-    return local.grid.memory, local.centre, local.radius, local.key, local.n_used
+def insert_parcel(parcel, first_row, rows, held, n_max, settles):
+    """:func:`_insert` of ``parcel`` (``counts, footprints, keys, centres, radii``) into the local sediment
+    ``held`` (a :data:`Held`), from the caller.  Returns the local sediment then."""
+    local = _local(held, n_max)
+    _insert(local, parcel, first_row, rows, settles)
+    return _held(local)
