@@ -15,13 +15,6 @@ REASONS = {"lines": "Why so long:", "parameters": "Why so many parameters:"}
 
 WAITING = {
     "parsim/core/sediment.py:_sampled_excess": {'parameters'},
-    "parsim/core/shapes/medial_balls.py:_ball_test": {'parameters'},
-    "parsim/core/shapes/medial_balls.py:_greedy_medial_balls": {'lines', 'parameters'},
-    "parsim/core/shapes/medial_balls.py:_medial_radius": {'parameters'},
-    "parsim/core/shapes/medial_balls.py:_nearest_surface_point": {'parameters'},
-    "parsim/core/shapes/superellipsoid_distance.py:_refine_direction": {'lines'},
-    "parsim/core/shapes/superellipsoid_distance.py:_superellipsoid_min": {'parameters'},
-    "parsim/core/shapes/union.py:_column_moments": {'lines'},
     "parsim/core/structure.py:_shell_counts": {'parameters'},
     "parsim/core/structure.py:_touching_in_cells": {'parameters'},
     "parsim/core/ts/frame.py:_first_contact_in_frame": {'parameters'},

@@ -332,7 +332,7 @@ def test_superellipsoid_distance_reproduces_eberly_for_exponents_2_2():
     """The support-function/surface-point distance search of the superellipsoid, at
     exponents (2, 2), against Eberly's exact ellipsoid distance at random interior points."""
     axes = np.array([2.0, 1.5, 1.0])
-    grid = shapes.smooth._direction_grid(axes, 2.0, 2.0, 2.0, 2.0)
+    body = shapes.smooth._superellipsoid_body(axes, 2.0, 2.0)
     perm = np.argsort(-axes, kind="stable").astype(np.int64)
     e_sorted = np.ascontiguousarray(axes[perm])
     rng = np.random.default_rng(1)
@@ -343,7 +343,7 @@ def test_superellipsoid_distance_reproduces_eberly_for_exponents_2_2():
     for point in p:
         exact = shapes.ellipsoid_distance._ellipsoid_closest(point, e_sorted, perm, q)
         for methods in (1, 2):
-            d = shapes.superellipsoid_distance._superellipsoid_min(point, axes, 2.0, 2.0, 2.0, 2.0, grid, 2.0, 6, -np.inf, q, nu, methods)
+            d = shapes.superellipsoid_distance._superellipsoid_min(point, body, 6, -np.inf, q, nu, methods)
             assert d == pytest.approx(exact, abs=1e-12)
 
 

@@ -5,7 +5,9 @@ import math
 import numpy as np
 
 from parsim.core.shapes.checks import _check_int
-from parsim.core.shapes.medial_balls import _chords, _greedy_medial_balls, _sample_cells, _verify_balls
+from parsim.core.shapes.medial_balls import (ConvexSurface, SurfaceSamples, _chords, _greedy_medial_balls,
+                                             _sample_cells, _verify_balls)
+from parsim.core.shapes.superellipsoid_distance import Superellipsoid
 from parsim.core.shapes.union import _recentre
 
 # Number of Fibonacci directions scanned by the distance search of a superellipsoid
@@ -104,6 +106,15 @@ def _direction_grid(axes, n1, n2, q1, q2):
     return np.ascontiguousarray(np.hstack([fib, h[:, None], u, y]))
 
 
+def _superellipsoid_body(axes, n1, n2):
+    """The :class:`Superellipsoid` of semi-axes ``axes`` and exponents n1, n2: with the dual
+    exponents q_i = n_i / (n_i - 1) and the start directions of its distance search."""
+    q1 = n1 / (n1 - 1.0)
+    q2 = n2 / (n2 - 1.0)
+    return Superellipsoid(axes, float(n1), float(n2), q1, q2, _direction_grid(axes, n1, n2, q1, q2),
+                          float(axes.max()))
+
+
 def _check_axes(semi_axes):
     try:
         a = np.array(semi_axes, dtype=np.float64)
@@ -121,26 +132,19 @@ def _medial_ball_body(axes, n1, n2, n_spheres, surface_samples, kind, frame):
     if surface_samples is None:
         surface_samples = max(SURFACE_SAMPLES_PER_SPHERE * n_spheres, MIN_SURFACE_SAMPLES)
     surface_samples = _check_int("surface_samples", surface_samples, 16)
-    q1 = n1 / (n1 - 1.0)
-    q2 = n2 / (n2 - 1.0)
-    amax = float(axes.max())
-    grid = _direction_grid(axes, n1, n2, q1, q2)
+    body = _superellipsoid_body(axes, n1, n2)
     perm = np.argsort(-axes, kind="stable").astype(np.int64)
-    e_sorted = np.ascontiguousarray(axes[perm])
-    points, normals = _surface_samples(axes, n1, n2, q1, q2, surface_samples)
-    h_plus, _ = _support_np(normals, axes, q1, q2)
+    surface = ConvexSurface(kind, body, np.ascontiguousarray(axes[perm]), perm, SUPPORT_STARTS)
+    points, normals = _surface_samples(axes, n1, n2, body.q1, body.q2, surface_samples)
+    h_plus, _ = _support_np(normals, axes, body.q1, body.q2)
     # width of the body along each sample normal (centrally symmetric body: 2 h(nu)):
     # the initial cusp depth, and twice the largest possible tangent-ball radius
     width = 2.0 * h_plus
-    chord = _chords(points, normals, width, axes, float(n1), float(n2))
-    lower, cs, dims, cell, order = _sample_cells(points, axes)
-    centres, radii = _greedy_medial_balls(
-        points, normals, chord, 0.5 * width, n_spheres, lower, cs, dims, cell, order,
-        kind, axes, float(n1), float(n2), e_sorted, perm, q1, q2,
-        grid, amax, SUPPORT_STARTS,
-    )
+    chord = _chords(points, normals, width, axes, body.n1, body.n2)
+    samples = SurfaceSamples(points, normals, chord, 0.5 * width)
+    centres, radii = _greedy_medial_balls(samples, _sample_cells(points, axes), surface, n_spheres)
     if kind != 0:
-        _verify_balls(centres, radii, axes, float(n1), float(n2), q1, q2, grid, amax, VERIFY_STARTS)
+        _verify_balls(centres, radii, body, VERIFY_STARTS)
         keep = radii > 0.0
         centres, radii = centres[keep], radii[keep]
     if frame == "body":

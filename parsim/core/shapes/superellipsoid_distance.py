@@ -10,8 +10,11 @@ both run by the one Newton driver :func:`_refine_direction`:
 - ``RADIAL``: directions are u, the value is ``|y(u) - p|``, the distance to the surface
   point ``y(u)`` in direction u (:func:`_radial`).
 
-Every value either search takes is an upper bound on the distance (p inside).
+Every value either search takes is an upper bound on the distance (p inside).  The body and
+the start directions of the searches travel as one :class:`Superellipsoid`.
 """
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -41,6 +44,21 @@ RADIAL = 1
 _GRID_N = 0
 _GRID_U = 4
 _GRID_Y = 7
+
+
+class Superellipsoid(NamedTuple):
+    """A convex superellipsoid as its distance searches read it: semi-axes ``axes`` (3,), the
+    exponents ``n1``, ``n2`` of :func:`_implicit` and their duals ``q1``, ``q2`` of
+    :func:`_support`, the ``grid`` of start directions (rows: normal n, h(n), direction u,
+    y(u); see smooth._direction_grid) and the largest semi-axis ``amax``."""
+
+    axes: np.ndarray
+    n1: float
+    n2: float
+    q1: float
+    q2: float
+    grid: np.ndarray
+    amax: float
 
 
 @jit
@@ -228,6 +246,44 @@ def _radial_hessian(u, p, axes, n1, n2, t1, t2, uu, y, dy1, dy2, hh):
     return hh[0, 0], 0.5 * (hh[0, 1] + hh[1, 0]), hh[1, 1]
 
 
+@jit(inline="always")
+def _merit(search, value):
+    """The function whose decrease the line search demands: g (SUPPORT) or f^2 / 2 (RADIAL)."""
+    return value if search == SUPPORT else 0.5 * value * value
+
+
+@jit(inline="always")
+def _tangent_gradient(search, x, p, t1, t2, dx1, dx2):
+    """Gradient (g1, g2) of the merit in the frame (t1, t2): t_i . (x - p) for SUPPORT (x the
+    support point, the gradient of h), (y - p) . dy/dt_i for RADIAL (x = y, dx_i = dy/dt_i)."""
+    r0 = x[0] - p[0]
+    r1 = x[1] - p[1]
+    r2 = x[2] - p[2]
+    if search == SUPPORT:
+        return t1[0] * r0 + t1[1] * r1 + t1[2] * r2, t2[0] * r0 + t2[1] * r1 + t2[2] * r2
+    return r0 * dx1[0] + r1 * dx1[1] + r2 * dx1[2], r0 * dx2[0] + r1 * dx2[1] + r2 * dx2[2]
+
+
+@jit(inline="always")
+def _limited_step(d1, d2):
+    """The step (d1, d2) shortened to at most NEWTON_MAX_STEP (radians)."""
+    step = np.sqrt(d1 * d1 + d2 * d2)
+    if step > NEWTON_MAX_STEP:
+        d1 *= NEWTON_MAX_STEP / step
+        d2 *= NEWTON_MAX_STEP / step
+    return d1, d2
+
+
+@jit(inline="always")
+def _step_on_sphere(d, d1, d2, t1, t2, out):
+    """out <- the unit vector along d + d1 t1 + d2 t2 (a step in tangent coordinates at d)."""
+    for i in range(3):
+        out[i] = d[i] + d1 * t1[i] + d2 * t2[i]
+    norm = np.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
+    for i in range(3):
+        out[i] /= norm
+
+
 @jit
 def _refine_direction(search, d, p, axes, ea, eb, amax, threshold):
     """Local minimum of the search's objective over unit directions d, from (and updating) d.
@@ -238,12 +294,12 @@ def _refine_direction(search, d, p, axes, ea, eb, amax, threshold):
     gradient (y - p) . dy/dt_i of f^2 / 2; it converges fast where the surface is flat
     (large exponents), where the support function is nearly non-differentiable.
 
-    Newton's method on the sphere in tangent coordinates (t1, t2): analytic gradient,
-    central-difference Hessian (:func:`_support_hessian`, :func:`_radial_hessian`),
-    Levenberg-Marquardt shift (:func:`_newton_step`), steps at most NEWTON_MAX_STEP,
-    Armijo backtracking on g (SUPPORT) or f^2 / 2 (RADIAL), so the value only decreases
-    and every value is an upper bound on the distance.  Stops early once the value is
-    below threshold.  Returns the value.
+    Newton's method on the sphere in tangent coordinates (t1, t2): analytic gradient
+    (:func:`_tangent_gradient`), central-difference Hessian (:func:`_support_hessian`,
+    :func:`_radial_hessian`), Levenberg-Marquardt shift (:func:`_newton_step`), steps at most
+    NEWTON_MAX_STEP, Armijo backtracking on g (SUPPORT) or f^2 / 2 (RADIAL) (:func:`_merit`),
+    so the value only decreases and every value is an upper bound on the distance.  Stops
+    early once the value is below threshold.  Returns the value.
     """
     x = np.empty(3)  # surface point of the last evaluated direction
     dx1 = np.empty(3)  # RADIAL: its derivatives along t1, t2
@@ -274,15 +330,7 @@ def _refine_direction(search, d, p, axes, ea, eb, amax, threshold):
         if search == RADIAL:
             # the derivatives of y along the new frame (x, the support point, needs no frame)
             _radial(d, axes, ea, eb, x, dx1, dx2, t1, t2)
-        r0 = x[0] - p[0]
-        r1 = x[1] - p[1]
-        r2 = x[2] - p[2]
-        if search == SUPPORT:
-            g1 = t1[0] * r0 + t1[1] * r1 + t1[2] * r2
-            g2 = t2[0] * r0 + t2[1] * r1 + t2[2] * r2
-        else:
-            g1 = r0 * dx1[0] + r1 * dx1[1] + r2 * dx1[2]
-            g2 = r0 * dx2[0] + r1 * dx2[1] + r2 * dx2[2]
+        g1, g2 = _tangent_gradient(search, x, p, t1, t2, dx1, dx2)
         if g1 * g1 + g2 * g2 <= tol2:
             break
         if search == SUPPORT:
@@ -290,29 +338,20 @@ def _refine_direction(search, d, p, axes, ea, eb, amax, threshold):
         else:
             h11, h12, h22 = _radial_hessian(d, p, axes, ea, eb, t1, t2, s1, s2, s3, s4, hs)
         d1, d2 = _newton_step(h11, h12, h22, g1, g2, gradient_scale)
-        step = np.sqrt(d1 * d1 + d2 * d2)
-        if step > NEWTON_MAX_STEP:
-            d1 *= NEWTON_MAX_STEP / step
-            d2 *= NEWTON_MAX_STEP / step
+        d1, d2 = _limited_step(d1, d2)
         slope = g1 * d1 + g2 * d2
-        merit = value if search == SUPPORT else 0.5 * value * value
+        merit = _merit(search, value)
         accepted = False
         full = True
         new = value
-        for _bt in range(50):
-            for i in range(3):
-                trial[i] = d[i] + d1 * t1[i] + d2 * t2[i]
-            norm = np.sqrt(trial[0] * trial[0] + trial[1] * trial[1] + trial[2] * trial[2])
-            for i in range(3):
-                trial[i] /= norm
+        for _bt in range(50):  # Armijo backtracking
+            _step_on_sphere(d, d1, d2, t1, t2, trial)
             if search == SUPPORT:
                 new = _support(trial, axes, ea, eb, x) - (trial[0] * p[0] + trial[1] * p[1] + trial[2] * p[2])
-                new_merit = new
             else:
                 _radial(trial, axes, ea, eb, x, dx1, dx2, t1, t2)
                 new = np.sqrt((x[0] - p[0]) ** 2 + (x[1] - p[1]) ** 2 + (x[2] - p[2]) ** 2)
-                new_merit = 0.5 * new * new
-            if new_merit <= merit + ARMIJO_C * slope and new < value:
+            if _merit(search, new) <= merit + ARMIJO_C * slope and new < value:
                 accepted = True
                 break
             full = False
@@ -387,9 +426,69 @@ def _surface_point_normal(search, d, axes, ea, eb, q_out, nu_out):
         _radial_normal(d, axes, ea, eb, q_out, nu_out)
 
 
+@jit(inline="always")
+def _exponents(search, body):
+    """The exponents the search's functions take: the duals q1, q2 (SUPPORT) or n1, n2 (RADIAL)."""
+    if search == SUPPORT:
+        return body.q1, body.q2
+    return body.n1, body.n2
+
+
 @jit
-def _superellipsoid_min(p, axes, n1, n2, q1, q2, grid, amax, n_starts, threshold, q_out, nu_out, methods=3):
-    """Distance of an interior point p to the surface of a convex superellipsoid.
+def _scan_grid(p, grid, values):
+    """values[search, k] <- the value of each search at grid direction k (SUPPORT: h(n) - n.p,
+    RADIAL: |y(u) - p|); returns the first index of the smallest value of each."""
+    k_support = 0
+    k_radial = 0
+    for k in range(grid.shape[0]):
+        values[SUPPORT, k] = grid[k, 3] - (grid[k, 0] * p[0] + grid[k, 1] * p[1] + grid[k, 2] * p[2])
+        values[RADIAL, k] = np.sqrt((grid[k, 7] - p[0]) ** 2 + (grid[k, 8] - p[1]) ** 2 + (grid[k, 9] - p[2]) ** 2)
+        if values[SUPPORT, k] < values[SUPPORT, k_support]:
+            k_support = k
+        if values[RADIAL, k] < values[RADIAL, k_radial]:
+            k_radial = k
+    return k_support, k_radial
+
+
+@jit
+def _refine_starts(search, p, body, values, n_starts, threshold, best, q_out, nu_out):
+    """The smallest of ``best`` and the search's values refined (:func:`_refine_direction`) from
+    its best ``n_starts`` mutually separated grid directions (``values``: the search's row of
+    :func:`_scan_grid`); q_out, nu_out <- the surface point and normal of each new smallest.
+    Starts are separated by their normals (SUPPORT) or by their surface points seen from p
+    (RADIAL).  Returns as soon as the smallest is below ``threshold``."""
+    grid = body.grid
+    ea, eb = _exponents(search, body)
+    start = _GRID_N if search == SUPPORT else _GRID_U
+    apart = _GRID_N if search == SUPPORT else _GRID_Y
+    cos_sep = np.cos(START_SEPARATION)
+    chosen = np.empty(n_starts, dtype=np.int64)
+    d = np.empty(3)
+    origin = np.zeros(3)
+    for i in range(3):
+        origin[i] = 0.0 if search == SUPPORT else p[i]
+    nc = 0
+    for _ in range(n_starts):
+        kbest = _separated_best(values, grid[:, apart:apart + 3], origin, chosen, nc, cos_sep)
+        if kbest < 0:
+            break
+        chosen[nc] = kbest
+        nc += 1
+        for i in range(3):
+            d[i] = grid[kbest, start + i]
+        v = _refine_direction(search, d, p, body.axes, ea, eb, body.amax, threshold)
+        if v < best:
+            best = v
+            _surface_point_normal(search, d, body.axes, ea, eb, q_out, nu_out)
+        if best < threshold:
+            return best
+    return best
+
+
+@jit
+def _superellipsoid_min(p, body, n_starts, threshold, q_out, nu_out, methods=3):
+    """Distance of an interior point p to the surface of the convex superellipsoid ``body``
+    (a :class:`Superellipsoid`).
 
     Two independent local searches, each of whose values is an upper bound on the
     distance; the result is the smaller of those run (``methods``: bit 1 SUPPORT, bit 2
@@ -400,60 +499,28 @@ def _superellipsoid_min(p, axes, n1, n2, q1, q2, grid, amax, n_starts, threshold
       h the closed-form support function (:func:`_support`); negative outside;
     - RADIAL: min over directions u of |y(u) - p|, y(u) the surface point in direction u.
 
-    Each scans fixed directions (``grid`` rows: normal n, h(n), direction u, y(u)) and
-    refines the best ``n_starts`` mutually separated ones with :func:`_refine_direction`:
-    normals more than START_SEPARATION apart, and surface points more than
-    START_SEPARATION apart as seen from p, so that the nearest points on two faces
-    meeting at an edge both get a start.  Returns early, with a value below
-    ``threshold``, as soon as one is found.  The nearest surface point found goes to
-    q_out and its outward unit normal to nu_out.
+    Each scans fixed directions (``body.grid`` rows: normal n, h(n), direction u, y(u);
+    :func:`_scan_grid`) and refines the best ``n_starts`` mutually separated ones with
+    :func:`_refine_direction` (:func:`_refine_starts`): normals more than START_SEPARATION
+    apart, and surface points more than START_SEPARATION apart as seen from p, so that the
+    nearest points on two faces meeting at an edge both get a start.  Returns early, with a
+    value below ``threshold``, as soon as one is found.  The nearest surface point found
+    goes to q_out and its outward unit normal to nu_out.
     """
-    m = grid.shape[0]
-    # the value of each search at every grid direction, and the first smallest one
-    values = np.empty((2, m))
-    k_support = 0
-    k_radial = 0
-    for k in range(m):
-        values[SUPPORT, k] = grid[k, 3] - (grid[k, 0] * p[0] + grid[k, 1] * p[1] + grid[k, 2] * p[2])
-        values[RADIAL, k] = np.sqrt((grid[k, 7] - p[0]) ** 2 + (grid[k, 8] - p[1]) ** 2 + (grid[k, 9] - p[2]) ** 2)
-        if values[SUPPORT, k] < values[SUPPORT, k_support]:
-            k_support = k
-        if values[RADIAL, k] < values[RADIAL, k_radial]:
-            k_radial = k
+    grid = body.grid
+    values = np.empty((2, grid.shape[0]))
+    k_support, k_radial = _scan_grid(p, grid, values)
     for search in (SUPPORT, RADIAL):
         k = k_support if search == SUPPORT else k_radial
         if methods & (1 << search) and values[search, k] < threshold:
-            ea, eb = (q1, q2) if search == SUPPORT else (n1, n2)
+            ea, eb = _exponents(search, body)
             start = _GRID_N if search == SUPPORT else _GRID_U
-            _surface_point_normal(search, grid[k, start:start + 3], axes, ea, eb, q_out, nu_out)
+            _surface_point_normal(search, grid[k, start:start + 3], body.axes, ea, eb, q_out, nu_out)
             return values[search, k]
-    cos_sep = np.cos(START_SEPARATION)
-    chosen = np.empty(n_starts, dtype=np.int64)
-    d = np.empty(3)
-    origin = np.zeros(3)
     best = np.inf
     for search in (SUPPORT, RADIAL):
-        if not methods & (1 << search):
-            continue
-        ea, eb = (q1, q2) if search == SUPPORT else (n1, n2)
-        start = _GRID_N if search == SUPPORT else _GRID_U
-        # starts are separated by their normals, or by their surface points seen from p
-        apart = _GRID_N if search == SUPPORT else _GRID_Y
-        for i in range(3):
-            origin[i] = 0.0 if search == SUPPORT else p[i]
-        nc = 0
-        for _ in range(n_starts):
-            kbest = _separated_best(values[search], grid[:, apart:apart + 3], origin, chosen, nc, cos_sep)
-            if kbest < 0:
-                break
-            chosen[nc] = kbest
-            nc += 1
-            for i in range(3):
-                d[i] = grid[kbest, start + i]
-            v = _refine_direction(search, d, p, axes, ea, eb, amax, threshold)
-            if v < best:
-                best = v
-                _surface_point_normal(search, d, axes, ea, eb, q_out, nu_out)
+        if methods & (1 << search):
+            best = _refine_starts(search, p, body, values[search], n_starts, threshold, best, q_out, nu_out)
             if best < threshold:
                 return best
     return best

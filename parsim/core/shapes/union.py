@@ -227,15 +227,133 @@ def _interval_buffers(cap):
 
 
 @jit
+def _spheres_on_row(centres, radii, xmin, order, active, nact, ptr, x, h):
+    """Update the list of the spheres whose x-range contains the row x: ``active[:nact]``, to
+    which the spheres ``order[ptr:]`` (sorted by ``xmin`` = x - r) are added as the row
+    reaches them, from which those that end before it are dropped.  Returns (nact, ptr,
+    a bound on the number of intervals they cut on the row's columns)."""
+    n = radii.shape[0]
+    while ptr < n and xmin[order[ptr]] <= x:
+        active[nact] = order[ptr]
+        nact += 1
+        ptr += 1
+    k = 0
+    total = 0
+    for a in range(nact):
+        s = active[a]
+        if centres[s, 0] + radii[s] >= x:
+            active[k] = s
+            k += 1
+            total += int(2.0 * radii[s] / h) + 2
+    return k, ptr, total
+
+
+@jit
+def _row_intervals(centres, radii, active, nact, x, y0, h, ny, col, lo, hi):
+    """The z-intervals (lo, hi) that the spheres ``active[:nact]`` cut on the columns
+    y = y0 + (j + 1/2) h, j < ny, of the row x, with their column j (col); returns their count.
+    A sphere meets the plane of the row in a disc of radius w = sqrt(r^2 - (x - c_x)^2) and a
+    column in z = c_z -+ sqrt(w^2 - (y - c_y)^2)."""
+    m = 0
+    for a in range(nact):
+        s = active[a]
+        dx = x - centres[s, 0]
+        w2 = radii[s] * radii[s] - dx * dx
+        if w2 <= 0.0:
+            continue
+        w = np.sqrt(w2)
+        cy = centres[s, 1]
+        cz = centres[s, 2]
+        jlo = int(np.ceil((cy - w - y0) / h - 0.5))
+        jhi = int(np.floor((cy + w - y0) / h - 0.5))
+        if jlo < 0:
+            jlo = 0
+        if jhi > ny - 1:
+            jhi = ny - 1
+        for j in range(jlo, jhi + 1):
+            dy = y0 + (j + 0.5) * h - cy
+            t2 = w2 - dy * dy
+            if t2 <= 0.0:
+                continue
+            t = np.sqrt(t2)
+            col[m] = j
+            lo[m] = cz - t
+            hi[m] = cz + t
+            m += 1
+    return m
+
+
+@jit
+def _by_column(col, lo, hi, m, start, fill, slo, shi):
+    """Counting sort of the first m intervals by column: the intervals of column j go to
+    (slo, shi)[start[j]:start[j + 1]] in their order of appearance (``fill``: scratch)."""
+    ny = fill.shape[0]
+    start[:] = 0
+    for q in range(m):
+        start[col[q] + 1] += 1
+    for j in range(ny):
+        start[j + 1] += start[j]
+    for j in range(ny):
+        fill[j] = start[j]
+    for q in range(m):
+        p = fill[col[q]]
+        slo[p] = lo[q]
+        shi[p] = hi[q]
+        fill[col[q]] += 1
+
+
+@jit
+def _merged_column(slo, shi, a0, a1):
+    """Length L and integral of z of the union of the intervals (slo, shi)[a0:a1] (a0 < a1):
+    sorted by lower end, then merged; each merged interval [l, u] adds u - l and
+    (u - l)(u + l) / 2."""
+    _sort_pairs(slo, shi, a0, a1)
+    cur_lo = slo[a0]
+    cur_hi = shi[a0]
+    length = 0.0
+    zmom = 0.0
+    for q in range(a0 + 1, a1):
+        if slo[q] > cur_hi:
+            length += cur_hi - cur_lo
+            zmom += 0.5 * (cur_hi - cur_lo) * (cur_hi + cur_lo)
+            cur_lo = slo[q]
+            cur_hi = shi[q]
+        elif shi[q] > cur_hi:
+            cur_hi = shi[q]
+    length += cur_hi - cur_lo
+    zmom += 0.5 * (cur_hi - cur_lo) * (cur_hi + cur_lo)
+    return length, zmom
+
+
+@jit
+def _row_moments(slo, shi, start, y0, h):
+    """Sums over the columns of a row of the covered length L, of y L and of the integral of z
+    (the intervals of column j in (slo, shi)[start[j]:start[j + 1]], :func:`_by_column`)."""
+    row_v = 0.0
+    row_my = 0.0
+    row_mz = 0.0
+    for j in range(start.shape[0] - 1):
+        a0 = start[j]
+        a1 = start[j + 1]
+        if a1 == a0:
+            continue
+        length, zmom = _merged_column(slo, shi, a0, a1)
+        row_v += length
+        row_my += (y0 + (j + 0.5) * h) * length
+        row_mz += zmom
+    return row_v, row_my, row_mz
+
+
+@jit
 def _column_moments(centres, radii, order, x0, y0, h, nx, ny):
     """Volume and first moments of a union of spheres on a grid of z-columns.
 
     Column (i, j) is the line x = x0 + (i + 1/2) h, y = y0 + (j + 1/2) h.  Each sphere
-    cuts it in an exact interval; the union of the intervals (sort and merge) gives the
-    exact length L and exact integral of z over the column.  Volume and moments are
-    h^2 sums over the columns (midpoint rule in x and y).  Rows (fixed x) are processed
-    one at a time with the spheres whose x-range contains the row (``order`` sorts the
-    spheres by x - r).
+    cuts it in an exact interval (:func:`_row_intervals`); the union of the intervals (sort
+    and merge, :func:`_merged_column`) gives the exact length L and exact integral of z over
+    the column.  Volume and moments are h^2 sums over the columns (midpoint rule in x and
+    y).  Rows (fixed x) are processed one at a time with the spheres whose x-range contains
+    the row (:func:`_spheres_on_row`; ``order`` sorts the spheres by x - r).
     """
     n = radii.shape[0]
     xmin = centres[:, 0] - radii
@@ -252,90 +370,17 @@ def _column_moments(centres, radii, order, x0, y0, h, nx, ny):
     mz = 0.0
     for i in range(nx):
         x = x0 + (i + 0.5) * h
-        while ptr < n and xmin[order[ptr]] <= x:
-            active[nact] = order[ptr]
-            nact += 1
-            ptr += 1
-        k = 0
-        total = 0
-        for a in range(nact):
-            s = active[a]
-            if centres[s, 0] + radii[s] >= x:
-                active[k] = s
-                k += 1
-                total += int(2.0 * radii[s] / h) + 2
-        nact = k
+        nact, ptr, total = _spheres_on_row(centres, radii, xmin, order, active, nact, ptr, x, h)
         if nact == 0:
             continue
         if total > cap:
             cap = 2 * total
             col, lo, hi, slo, shi = _interval_buffers(cap)
-        m = 0
-        for a in range(nact):
-            s = active[a]
-            dx = x - centres[s, 0]
-            w2 = radii[s] * radii[s] - dx * dx
-            if w2 <= 0.0:
-                continue
-            w = np.sqrt(w2)
-            cy = centres[s, 1]
-            cz = centres[s, 2]
-            jlo = int(np.ceil((cy - w - y0) / h - 0.5))
-            jhi = int(np.floor((cy + w - y0) / h - 0.5))
-            if jlo < 0:
-                jlo = 0
-            if jhi > ny - 1:
-                jhi = ny - 1
-            for j in range(jlo, jhi + 1):
-                dy = y0 + (j + 0.5) * h - cy
-                t2 = w2 - dy * dy
-                if t2 <= 0.0:
-                    continue
-                t = np.sqrt(t2)
-                col[m] = j
-                lo[m] = cz - t
-                hi[m] = cz + t
-                m += 1
+        m = _row_intervals(centres, radii, active, nact, x, y0, h, ny, col, lo, hi)
         if m == 0:
             continue
-        start[:] = 0
-        for q in range(m):
-            start[col[q] + 1] += 1
-        for j in range(ny):
-            start[j + 1] += start[j]
-        for j in range(ny):
-            fill[j] = start[j]
-        for q in range(m):
-            p = fill[col[q]]
-            slo[p] = lo[q]
-            shi[p] = hi[q]
-            fill[col[q]] += 1
-        row_v = 0.0
-        row_my = 0.0
-        row_mz = 0.0
-        for j in range(ny):
-            a0 = start[j]
-            a1 = start[j + 1]
-            if a1 == a0:
-                continue
-            _sort_pairs(slo, shi, a0, a1)
-            cur_lo = slo[a0]
-            cur_hi = shi[a0]
-            length = 0.0
-            zmom = 0.0
-            for q in range(a0 + 1, a1):
-                if slo[q] > cur_hi:
-                    length += cur_hi - cur_lo
-                    zmom += 0.5 * (cur_hi - cur_lo) * (cur_hi + cur_lo)
-                    cur_lo = slo[q]
-                    cur_hi = shi[q]
-                elif shi[q] > cur_hi:
-                    cur_hi = shi[q]
-            length += cur_hi - cur_lo
-            zmom += 0.5 * (cur_hi - cur_lo) * (cur_hi + cur_lo)
-            row_v += length
-            row_my += (y0 + (j + 0.5) * h) * length
-            row_mz += zmom
+        _by_column(col, lo, hi, m, start, fill, slo, shi)
+        row_v, row_my, row_mz = _row_moments(slo, shi, start, y0, h)
         vol += row_v
         mx += x * row_v
         my += row_my
