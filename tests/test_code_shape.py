@@ -33,7 +33,6 @@ WAITING = {
     "parsim/core/sdbd/rounds.py:run_rounds": {'parameters'},
     "parsim/core/sdbd/rounds.py:settle_again": {'parameters'},
     "parsim/core/sdbd/ties.py:push_event": {'parameters'},
-    "parsim/core/sediment.py:_sampled_excess": {'parameters'},
     "parsim/core/shapes/medial_balls.py:_ball_test": {'parameters'},
     "parsim/core/shapes/medial_balls.py:_greedy_medial_balls": {'lines', 'parameters'},
     "parsim/core/shapes/medial_balls.py:_medial_radius": {'parameters'},
@@ -41,10 +40,6 @@ WAITING = {
     "parsim/core/shapes/superellipsoid_distance.py:_refine_direction": {'lines'},
     "parsim/core/shapes/superellipsoid_distance.py:_superellipsoid_min": {'parameters'},
     "parsim/core/shapes/union.py:_column_moments": {'lines'},
-    "parsim/core/structure.py:_shell_counts": {'parameters'},
-    "parsim/core/structure.py:_touching_in_cells": {'parameters'},
-    "parsim/core/ts/frame.py:_first_contact_in_frame": {'parameters'},
-    "parsim/core/ts/frame.py:_pairs_in_frame": {'parameters'},
 }
 
 
