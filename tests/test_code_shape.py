@@ -13,13 +13,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "parsim"
 MAX_LINES, MAX_PARAMETERS = 80, 12
 REASONS = {"lines": "Why so long:", "parameters": "Why so many parameters:"}
 
-WAITING = {
-    "parsim/core/sediment.py:_sampled_excess": {'parameters'},
-    "parsim/core/structure.py:_shell_counts": {'parameters'},
-    "parsim/core/structure.py:_touching_in_cells": {'parameters'},
-    "parsim/core/ts/frame.py:_first_contact_in_frame": {'parameters'},
-    "parsim/core/ts/frame.py:_pairs_in_frame": {'parameters'},
-}
+WAITING: dict[str, set] = {}
 
 
 def _overlong(package: Path = PACKAGE) -> dict[str, set]:

@@ -34,6 +34,7 @@ box, so periodic wrapping changes nothing for them).
 """
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -180,6 +181,35 @@ def _checked_slabs(slabs):
     return slabs
 
 
+class CellList(NamedTuple):
+    """Spheres binned in the cubic cells of :class:`_SphereGrid`, as its kernels read them: cell c holds the
+    places start[c]:start[c + 1] of the grid's order; the box ``lower`` … ``upper`` is cut into cells[0] ×
+    cells[1] columns in x and y, the heights from ``z_lower`` up into cells[2] layers of ``cell_height``."""
+
+    start: np.ndarray  # (cells[0] cells[1] cells[2] + 1,) the first place of each cell in the grid's order
+    lower: np.ndarray  # (2,) the box's lower corner in x and y
+    upper: np.ndarray  # (2,) its upper corner
+    z_lower: float  # the bottom of the lowest layer
+    cell_height: float  # the layers' height: the largest diameter of the binned spheres
+    cells: np.ndarray  # (3,) cells along x, y and z
+
+
+class OverlapCaps(NamedTuple):
+    """The caps of the spheres towards the spheres they overlap (:func:`_overlap_lists`,
+    :func:`parsim.core.shapes.union.overlap_caps`), one row per cap, sphere i's caps in the rows
+    first[i]:first[i + 1]; the cap of sphere i towards j is the part of S_i with (x − c_i)·u >= s."""
+
+    centres: np.ndarray  # (n, 3) the spheres' centres c_i
+    radii: np.ndarray  # (n,) their radii r_i
+    keys: np.ndarray  # (n,) what each sphere is, whatever the others measured with it (:func:`sphere_keys`)
+    first: np.ndarray  # (n + 1,) each sphere's first row
+    neighbour: np.ndarray  # (rows,) the sphere j that sphere i overlaps
+    offset: np.ndarray  # (rows, 3) c_j − c_i, the minimum image in x and y
+    axis: np.ndarray  # (rows, 3) u, the unit vector from c_i towards c_j
+    plane: np.ndarray  # (rows,) s = max(d − r_j, −r_i)
+    distance: np.ndarray  # (rows,) d = |c_j − c_i|
+
+
 class SlabCover:
     """The union of spheres in the slabs between consecutive ``edges``, prepared: the spheres' exact volumes in
     the slabs, their overlaps, and which overlap caps must be sampled (``sampled_caps`` of them).
@@ -210,7 +240,7 @@ class SlabCover:
             raise ValueError("keys must hold one key per sphere")
         radius = float(np.mean(grid.radii[grid.order]) if mean_radius is None else mean_radius)
         if overlapping is None:
-            centres, radii, order, start, lower, upper, _, _, cells = grid.arrays()
+            order, cells = grid.order, grid.cell_list()
         else:
             kept = np.asarray(overlapping, dtype=bool)
             if kept.shape != grid.radii.shape:
@@ -219,21 +249,19 @@ class SlabCover:
             if not kept_sorted.any():
                 return
             order = grid.order[kept_sorted]
-            centres, radii = grid.positions[order], grid.radii[order]
             # cell c holds the chosen spheres start[c]:start[c + 1] of the grid's order
-            start = np.concatenate([[0], np.cumsum(kept_sorted)])[grid.start]
-            lower, upper, cells = grid.lower, grid.upper, grid.cells
-        first, neighbour, offset = _overlap_lists(centres, radii, OVERLAP_TOLERANCE * radius, start, lower, upper,
-                                                  cells)
+            cells = grid.cell_list(np.concatenate([[0], np.cumsum(kept_sorted)])[grid.start])
+        centres, radii = grid.positions[order], grid.radii[order]
+        first, neighbour, offset = _overlap_lists(centres, radii, OVERLAP_TOLERANCE * radius, cells)
         if not len(neighbour):
             return
         axis, plane, distance = overlap_caps(radii, first, neighbour, offset)
-        sorted_keys = np.ascontiguousarray(keys[order])
-        exact, kind = _exact_excess(centres, radii, sorted_keys, first, neighbour, offset, axis, plane, distance,
-                                    self.edges, _NODES, _WEIGHTS)
+        caps = OverlapCaps(centres, radii, np.ascontiguousarray(keys[order]), first, neighbour, offset, axis, plane,
+                           distance)
+        exact, kind = _exact_excess(caps, self.edges, _NODES, _WEIGHTS)
         self._volume = self._volume - exact
         self.sampled_caps = int(np.count_nonzero(kind))
-        self._caps = (centres, radii, sorted_keys, first, neighbour, offset, axis, plane, distance, kind)
+        self._caps = (caps, kind)
 
     def covered(self, slabs, points):
         """The union's volume in each slab box × [z_low, z_high) of ``slabs`` (rows whose heights are among the
@@ -279,9 +307,11 @@ class _SphereGrid:
         self.order, self.start = _bin_by_cell(self.positions, self.lower, width, self.z_lower, reach, self.cells,
                                               layers_first)
 
-    def arrays(self):
-        return (self.positions[self.order], self.radii[self.order], self.order, self.start,
-                self.lower, self.upper, self.z_lower, self.cell_height, self.cells)
+    def cell_list(self, start=None):
+        """The grid's :class:`CellList`; ``start``: the cells' first places in a part of the grid's order
+        (by default the whole order's)."""
+        return CellList(self.start if start is None else start, self.lower, self.upper, self.z_lower,
+                        self.cell_height, self.cells)
 
 
 @jit
@@ -376,14 +406,15 @@ def _sphere_slab_volumes(positions, radii, order, edges):
 
 
 @jit
-def _overlap_lists(centres, radii, tolerance, start, lower, upper, cells):
+def _overlap_lists(centres, radii, tolerance, grid):
     """The spheres overlapping each sphere by more than ``tolerance`` and their minimum-image offsets c_j − c_i.
 
-    Works on the cell-sorted spheres (``centres``, ``radii``, cell c holding start[c]:start[c+1]),
-    cell by cell for locality; returns the CSR rows ``first`` (sphere i: first[i]:first[i+1]),
-    ``neighbour`` and ``offset``.
+    Works on the cell-sorted spheres (``centres``, ``radii``, cell c of the :class:`CellList` ``grid``
+    holding start[c]:start[c+1]), cell by cell for locality; returns the CSR rows ``first`` (sphere i:
+    first[i]:first[i+1]), ``neighbour`` and ``offset``.
     """
-    width = upper - lower
+    start, cells = grid.start, grid.cells
+    width = grid.upper - grid.lower
     n = centres.shape[0]
     capacity = 4 * n + 16
     neighbour = np.empty(capacity, dtype=np.int64)
@@ -555,27 +586,29 @@ def _add_lens(excess, edges, factor, zc, r_i, r_j, d, offset, u, nodes, weights)
 
 
 @jit
-def _exact_excess(positions, radii, keys, first, neighbour, offset, axis, plane, distance, edges, nodes, weights):
+def _exact_excess(caps, edges, nodes, weights):
     """The exact part of the overlap excess in each slab, and which caps must be sampled.
 
     Every cap of sphere i towards j holds half the lens S_i ∩ S_j in the slabs it lies in (:func:`_add_lens`;
     the pair's whole lens is added once, on the side of the sphere of the lower key). For a cap disjoint from
     the sphere's other caps (:func:`parsim.core.shapes.union.cap_is_pairwise`) that is its excess: no point
     of it lies in a third sphere. For the other caps it is the control variate of :func:`_sampled_excess`,
-    which samples the rest. Returns (excess per slab, per cap: 1 when sampled).
+    which samples the rest. ``caps``: :class:`OverlapCaps`; ``nodes``, ``weights``: the Gauss–Legendre rule
+    of :func:`_lens_below`. Returns (excess per slab, per cap: 1 when sampled).
     """
+    radii, keys, first, neighbour = caps.radii, caps.keys, caps.first, caps.neighbour
     excess = np.zeros(len(edges) - 1)
     kind = np.zeros(len(neighbour), dtype=np.int64)
-    for i in range(positions.shape[0]):
-        r_i, zc = radii[i], positions[i, 2]
+    for i in range(caps.centres.shape[0]):
+        r_i, zc = radii[i], caps.centres[i, 2]
         if zc + r_i <= edges[0] or zc - r_i >= edges[-1]:
             continue
         for row in range(first[i], first[i + 1]):
             j = neighbour[row]
             if keys[i] < keys[j] or (keys[i] == keys[j] and i < j):
-                _add_lens(excess, edges, 1.0, zc, r_i, radii[j], distance[row], offset[row], axis[row], nodes,
-                          weights)
-            if not cap_is_pairwise(row, first[i], first[i + 1], axis, plane, r_i):
+                _add_lens(excess, edges, 1.0, zc, r_i, radii[j], caps.distance[row], caps.offset[row], caps.axis[row],
+                          nodes, weights)
+            if not cap_is_pairwise(row, first[i], first[i + 1], caps.axis, caps.plane, r_i):
                 kind[row] = 1
     return excess, kind
 
@@ -597,10 +630,9 @@ def _cap_shift(key_i, key_j, component):
 
 
 @jit
-def _sampled_excess(positions, radii, keys, first, neighbour, offset, axis, plane, distance, kind, edges, unit,
-                    nodes, weights):
-    """Per slab, the part of the excess ∫ (1 − 1/c(x)) dx of the sampled caps (``kind`` 1) that the exact half
-    lenses of :func:`_exact_excess` leave (c(x): spheres covering x).
+def _sampled_excess(caps, kind, edges, unit, nodes, weights):
+    """Per slab, the part of the excess ∫ (1 − 1/c(x)) dx of the sampled caps (of :class:`OverlapCaps` ``caps``,
+    those of ``kind`` 1) that the exact half lenses of :func:`_exact_excess` leave (c(x): spheres covering x).
 
     Sum of sphere volumes − excess = volume of the union. Points covered twice or more lie in
     the caps of sphere i towards its overlapping spheres. A cap is sampled with the quasi-random
@@ -610,13 +642,15 @@ def _sampled_excess(positions, radii, keys, first, neighbour, offset, axis, plan
     without double counting. The exact half lens g = 1/2 on S_i ∩ S_j is the control variate: the points
     sample w − g, whose integral adds to the half lens already counted.
     """
+    radii, first, neighbour = caps.radii, caps.first, caps.neighbour
+    offset, axis, plane = caps.offset, caps.axis, caps.plane
     n_points = unit.shape[0]
     excess = np.zeros(len(edges) - 1)
     e1 = np.empty(3)
     e2 = np.empty(3)
     p = np.empty(3)
-    for i in range(positions.shape[0]):
-        r_i, zc = radii[i], positions[i, 2]
+    for i in range(caps.centres.shape[0]):
+        r_i, zc = radii[i], caps.centres[i, 2]
         for row in range(first[i], first[i + 1]):
             if kind[row] == 0:
                 continue
@@ -632,7 +666,7 @@ def _sampled_excess(positions, radii, keys, first, neighbour, offset, axis, plan
             e2[0] = u[1] * e1[2] - u[2] * e1[1]
             e2[1] = u[2] * e1[0] - u[0] * e1[2]
             e2[2] = u[0] * e1[1] - u[1] * e1[0]
-            key_i, key_j = keys[i], keys[neighbour[row]]
+            key_i, key_j = caps.keys[i], caps.keys[neighbour[row]]
             shift_a, shift_b, shift_c = _cap_shift(key_i, key_j, 0), _cap_shift(key_i, key_j, 1), _cap_shift(
                 key_i, key_j, 2)
             volume = 4.0 * half_width * half_width * height / n_points
@@ -650,7 +684,7 @@ def _sampled_excess(positions, radii, keys, first, neighbour, offset, axis, plan
                 if slab < 0:
                     continue
                 covering = 1
-                caps = 0
+                in_caps = 0
                 own = False
                 for other in range(first[i], first[i + 1]):
                     k = neighbour[other]
@@ -660,8 +694,8 @@ def _sampled_excess(positions, radii, keys, first, neighbour, offset, axis, plan
                         own = own or other == row
                     if other == row or (p[0] * axis[other, 0] + p[1] * axis[other, 1] + p[2] * axis[other, 2]
                                         >= plane[other]):
-                        caps += 1
-                weight = (1.0 - 1.0 / covering) / caps if covering >= 2 else 0.0
+                        in_caps += 1
+                weight = (1.0 - 1.0 / covering) / in_caps if covering >= 2 else 0.0
                 if own:
                     weight -= 0.5
                 if weight != 0.0:

@@ -244,8 +244,8 @@ def shell_counts(centres, reference, r_max, bins, box_lower_xy, box_upper_xy, pe
     sorted_index = np.full(len(x), -1, dtype=np.int64)  # a centre's place in the cell list
     sorted_index[nearby[grid.order]] = np.arange(len(grid.order))
     return _shell_counts(grid.positions[grid.order], np.ascontiguousarray(x[nearby[grid.order]]),
-                         sorted_index[reference], r_max, bins, bool(periodic), grid.start, lower, upper, width,
-                         grid.z_lower, grid.cell_height, grid.cells, RDF_CELLS_PER_RANGE)
+                         sorted_index[reference], r_max, bins, bool(periodic), width, grid.cell_list(),
+                         RDF_CELLS_PER_RANGE)
 
 
 def evenly_spaced(n, most):
@@ -300,8 +300,8 @@ def contact_network(positions, radii, particle, box_lower_xy, box_upper_xy, peri
     overlapping = np.zeros(len(x), dtype=bool)
     x_sorted = _gather(x, order)
     row_start, partner, contacts = _touching_in_cells(x_sorted, _gather(radii, order), _gather(particle, order), order,
-                                                      tolerance, overlap_cut, bool(periodic), grid.start, lower, upper,
-                                                      grid.cells, CONTACTS_PER_SPHERE_GUESS * len(x) + 16, overlapping)
+                                                      tolerance, overlap_cut, bool(periodic), grid.cell_list(),
+                                                      CONTACTS_PER_SPHERE_GUESS * len(x) + 16, overlapping)
     pairs, normals = _sorted_contacts(x_sorted, order, row_start, partner, contacts, bool(periodic), upper - lower)
     return ContactNetwork(pairs, normals, overlapping)
 
@@ -415,23 +415,24 @@ def _in_box(x, lower, upper, periodic, z_low, z_high, margin):
 
 
 @jit
-def _shell_counts(sorted_centres, sorted_given, reference, r_max, bins, periodic, start, lower, upper, period, z_lower,
-                  cell_height, cells, reach):
-    """Histogram of the distances r < r_max from the reference centres to all other centres.
+def _shell_counts(sorted_centres, sorted_given, reference, r_max, bins, periodic, period, grid, reach):
+    """Histogram of the distances r < r_max from the reference centres to all other centres, in ``bins`` shells
+    uniform on [0, r_max).
 
-    ``sorted_centres``: the centres of the cell list in its order (wrapped into the box), cell c holding
-    start[c]:start[c + 1]; ``sorted_given``: the same centres as given, from which distances are computed
-    (minimum images over ``period`` when ``periodic``); ``reference``: the references' places in the list.
-    Cells are r_max / ``reach`` or more wide, so a reference scans ``reach`` cells on each side; the cells of
-    one column are consecutive, so each column is one run of the list.
+    ``sorted_centres``: the centres of the :class:`~parsim.core.sediment.CellList` ``grid`` in its order
+    (wrapped into the box), cell c holding start[c]:start[c + 1]; ``sorted_given``: the same centres as given,
+    from which distances are computed (minimum images over ``period`` when ``periodic``); ``reference``: the
+    references' places in the list. Cells are r_max / ``reach`` or more wide, so a reference scans ``reach``
+    cells on each side; the cells of one column are consecutive, so each column is one run of the list.
     """
-    width = upper - lower
+    start, lower, cells = grid.start, grid.lower, grid.cells
+    width = grid.upper - lower
     counts = np.zeros(bins, dtype=np.int64)
     columns = np.empty((2 * reach + 1) ** 2, dtype=np.int64)
     for i in reference:
         ci = int(np.floor((sorted_centres[i, 0] - lower[0]) / width[0] * cells[0])) % cells[0]
         cj = int(np.floor((sorted_centres[i, 1] - lower[1]) / width[1] * cells[1])) % cells[1]
-        ck = int(np.floor((sorted_centres[i, 2] - z_lower) / cell_height))
+        ck = int(np.floor((sorted_centres[i, 2] - grid.z_lower) / grid.cell_height))
         xi, yi, zi = sorted_given[i, 0], sorted_given[i, 1], sorted_given[i, 2]
         bottom, top = max(ck - reach, 0), min(ck + reach + 1, cells[2])
         if bottom >= top:
@@ -453,8 +454,7 @@ def _shell_counts(sorted_centres, sorted_given, reference, r_max, bins, periodic
 
 
 @jit
-def _touching_in_cells(x, radii, particle, order, tolerance, overlap_cut, periodic, start, lower, upper, cells,
-                       capacity, overlapping):
+def _touching_in_cells(x, radii, particle, order, tolerance, overlap_cut, periodic, grid, capacity, overlapping):
     """Every pair of spheres of the cell list closer than the contact criterion, found once: (row_start,
     partner, contacts), sphere m of the list (in its order) touching the spheres partner[row_start[m]:
     row_start[m + 1]] that come after it, and contacts[i + 1] the number of contacts of sphere i (its own
@@ -462,17 +462,19 @@ def _touching_in_cells(x, radii, particle, order, tolerance, overlap_cut, period
     numbers) the spheres that overlap another by more than ``overlap_cut`` (minimum images in x and y,
     see :func:`contact_network`).
 
-    ``x``, ``radii``, ``particle``: the spheres of a list sorted layer by layer (``layers_first`` of the
-    cell grid), ``order`` their own numbers. The cells are visited in order and each sphere meets the
-    later spheres of its 27 cells, read as runs of the list (:func:`_runs_around`), so the search reads
-    the list nearly sequentially; and as a sediment is deposited about layer by layer, the contacts
-    it finds one after the other belong to spheres of nearby numbers, which keeps the counts here
-    and the sorting of :func:`_sorted_contacts` within a small part of memory. A pair farther apart
-    than R_i + R_j + tolerance (minimum images, the shortest separation) is passed over at once;
-    for the others the gap test is the one of :func:`contact_pairs`, on x_j − x_i with i < j the
-    spheres' own numbers.
+    ``x``, ``radii``, ``particle``: the spheres of the :class:`~parsim.core.sediment.CellList` ``grid``,
+    sorted layer by layer (``layers_first`` of the cell grid), ``order`` their own numbers; ``capacity``: the
+    contacts the list of partners has room for at first (it doubles when full). The cells are visited in
+    order and each sphere meets the later spheres of its 27 cells, read as runs of the list
+    (:func:`_runs_around`), so the search reads the list nearly sequentially; and as a sediment is deposited
+    about layer by layer, the contacts it finds one after the other belong to spheres of nearby numbers,
+    which keeps the counts here and the sorting of :func:`_sorted_contacts` within a small part of memory.
+    A pair farther apart than R_i + R_j + tolerance (minimum images, the shortest separation) is passed
+    over at once; for the others the gap test is the one of :func:`contact_pairs`, on x_j − x_i with
+    i < j the spheres' own numbers.
     """
-    width = upper - lower
+    start, cells = grid.start, grid.cells
+    width = grid.upper - grid.lower
     n = x.shape[0]
     partner = np.empty(capacity, dtype=np.int64)
     row_start = np.zeros(n + 1, dtype=np.int64)

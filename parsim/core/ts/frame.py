@@ -16,6 +16,7 @@ possible contact (:meth:`ClusterFrame.first_contact`) and keeps no watch at all.
 """
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -38,24 +39,38 @@ CELLS_PER_CUTOFF = 4
 CELLS_PER_SPHERE = 4
 
 
+class BinnedFrame(NamedTuple):
+    """Rows of ``X`` binned where they were, in ``k^d`` cells of side ``side``, sorted cell by
+    cell: those of cell ``c`` are ``rows[first[c]:first[c + 1]]``, the ``s``-th of them binned at
+    ``X[s]`` with radius ``R[s]``, none larger than ``largest``."""
+
+    rows: np.ndarray  #: (n,) the rows, cell by cell
+    X: np.ndarray  #: (n, d) their positions when binned
+    R: np.ndarray  #: (n,) their radii
+    largest: float  #: the largest radius, 0 if none
+    first: np.ndarray  #: (k^d + 1,) each cell's first place in ``rows``
+    side: float  #: the cells' side
+    k: int  #: cells per side
+
+
 @jit
-def _pairs_in_frame(X, R, queries, reach, shift, binned_rows, binned_X, binned_R, largest, first, side, k, log):
-    """Pairs ``(q, j)``, ``q`` in ``queries``, ``j`` in ``binned_rows`` (sorted cell by cell,
-    those of cell ``c`` being ``binned_rows[first[c]:first[c + 1]]``, binned at ``binned_X``,
-    radii ``binned_R`` of at most ``largest``), with a gap ``|X_q - X_j| - R_q - R_j <= reach``.
-    Each query scans the cells within its search distance of ``X_q - shift``; the frame's
-    positions select the candidates, within a padded distance, and the pairs are decided on
-    ``X``, by the test of the whole-box searches, each candidate first brought up to date from
-    the ``log`` of deferred flights (:mod:`parsim.core.ts.deferred`)."""
+def _pairs_in_frame(X, R, queries, reach, shift, binned, log):
+    """Pairs ``(q, j)``, ``q`` in ``queries``, ``j`` in the :class:`BinnedFrame` ``binned``, with
+    a gap ``|X_q - X_j| - R_q - R_j <= reach``.  Each query scans the cells within its search
+    distance of ``X_q - shift``; the frame's positions select the candidates, within a padded
+    distance, and the pairs are decided on ``X``, by the test of the whole-box searches, each
+    candidate first brought up to date from the ``log`` of deferred flights
+    (:mod:`parsim.core.ts.deferred`)."""
+    binned_rows, binned_X, binned_R, first = binned.rows, binned.X, binned.R, binned.first
     d = X.shape[1]
     y = np.empty(d)
     pairs = np.empty((16, 2), dtype=np.int64)
     count = 0
     for q in queries:
-        cutoff = (R[q] + largest + reach) * (1.0 + ROUNDING_PAD)
+        cutoff = (R[q] + binned.largest + reach) * (1.0 + ROUNDING_PAD)
         for a in range(d):
             y[a] = X[q, a] - shift[a]
-        for c in cells_over(y - cutoff, y + cutoff, side, k):
+        for c in cells_over(y - cutoff, y + cutoff, binned.side, binned.k):
             for s in range(first[c], first[c + 1]):
                 padded = (R[q] + binned_R[s] + reach) * (1.0 + ROUNDING_PAD)
                 far = 0.0
@@ -88,15 +103,15 @@ def _segment_distance_sq(P, s, a, b):
 
 
 @jit
-def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned_rows, binned_X, binned_R, largest,
-                            first, side, k, log):
+def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned, log):
     """The earliest time within ``duration`` at which a query, flying straight at ``V_q``,
-    touches a binned row, all of which fly at the velocity of row ``reference``; ``inf`` if none
-    does.  Each query's path in the frame is cut into pieces at most a cell long, and the cells
-    around each piece are scanned: a row the path touches lies within ``R_q + R_j`` of it.  The
-    frame's positions select the candidates, the times come from ``X`` and ``V``
-    (:func:`parsim.core.ts.quiet.time_to_contact`), each candidate first brought up to date
-    from the ``log`` of deferred flights."""
+    touches a row of the :class:`BinnedFrame` ``binned``, all of which fly at the velocity of row
+    ``reference``; ``inf`` if none does.  Each query's path in the frame is cut into pieces at
+    most a cell long, and the cells around each piece are scanned: a row the path touches lies
+    within ``R_q + R_j`` of it.  The frame's positions select the candidates, the times come
+    from ``X`` and ``V`` (:func:`parsim.core.ts.quiet.time_to_contact`), each candidate first
+    brought up to date from the ``log`` of deferred flights."""
+    binned_rows, binned_X, binned_R, first, side = binned.rows, binned.X, binned.R, binned.first, binned.side
     d = X.shape[1]
     start = np.empty(d)
     end = np.empty(d)
@@ -107,13 +122,13 @@ def _first_contact_in_frame(X, V, R, queries, duration, reference, shift, binned
             length += (V[q, a] - V[reference, a]) ** 2
         length = math.sqrt(length) * duration
         pieces = max(1, int(math.ceil(length / side)))
-        reach = (R[q] + largest) * (1.0 + ROUNDING_PAD)
+        reach = (R[q] + binned.largest) * (1.0 + ROUNDING_PAD)
         for piece in range(pieces):
             for a in range(d):
                 u = V[q, a] - V[reference, a]
                 start[a] = X[q, a] - shift[a] + u * duration * piece / pieces
                 end[a] = X[q, a] - shift[a] + u * duration * (piece + 1) / pieces
-            for c in cells_over(np.minimum(start, end) - reach, np.maximum(start, end) + reach, side, k):
+            for c in cells_over(np.minimum(start, end) - reach, np.maximum(start, end) + reach, side, binned.k):
                 for s in range(first[c], first[c + 1]):
                     padded = (R[q] + binned_R[s]) * (1.0 + ROUNDING_PAD)
                     if _segment_distance_sq(binned_X, s, start, end) <= padded * padded:
@@ -138,11 +153,11 @@ class ClusterFrame:
         self.k, self.side = grid_size(box_length, cutoff / CELLS_PER_CUTOFF, X.shape[1], max(rows.size, 1),
                                       CELLS_PER_SPHERE)
         self._origin = X[rows[:1]].copy()  # where the reference sphere (the first row) was binned
-        order, self._first, _ = _sorted_by_cell(X[rows], self.side, self.k)
-        self._binned_rows = rows[order]
-        self._binned_X = X[self._binned_rows]
-        self._binned_R = R[self._binned_rows]
-        self._largest = float(self._binned_R.max(initial=0.0))
+        order, first, _ = _sorted_by_cell(X[rows], self.side, self.k)
+        binned_rows = rows[order]
+        binned_R = R[binned_rows]
+        self._binned = BinnedFrame(binned_rows, X[binned_rows], binned_R, float(binned_R.max(initial=0.0)), first,
+                                   self.side, self.k)
 
     def pairs_near(self, X, R, queries, reach, log=None):
         """Pairs ``(q, j)`` of rows, ``q`` in ``queries``, ``j`` in the frame, with a gap of at
@@ -151,8 +166,7 @@ class ClusterFrame:
         if self.rows.size == 0:
             return np.empty((0, 2), dtype=np.int64)
         log = no_log(X.shape[1]) if log is None else log
-        return _pairs_in_frame(X, R, queries, reach, self._shift(X, log), self._binned_rows, self._binned_X,
-                               self._binned_R, self._largest, self._first, self.side, self.k, log)
+        return _pairs_in_frame(X, R, queries, reach, self._shift(X, log), self._binned, log)
 
     def first_contact(self, X, V, R, queries, duration, log=None):
         """The earliest time within ``duration`` at which one of the rows ``queries`` touches a
@@ -161,8 +175,7 @@ class ClusterFrame:
         if self.rows.size == 0:
             return math.inf
         log = no_log(X.shape[1]) if log is None else log
-        return _first_contact_in_frame(X, V, R, queries, duration, self.rows[0], self._shift(X, log), self._binned_rows,
-                                       self._binned_X, self._binned_R, self._largest, self._first, self.side, self.k,
+        return _first_contact_in_frame(X, V, R, queries, duration, self.rows[0], self._shift(X, log), self._binned,
                                        log)
 
     def _shift(self, X, log):
