@@ -56,14 +56,28 @@ else:
 """
 
 
+#: cachegrind counts every thread: an idle BLAS or OpenMP thread that spins while it waits for work
+#: executes as many instructions as the machine's load lets it, which made counts vary by several per cent
+SINGLE_THREADED = {name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                                          "NUMBA_NUM_THREADS")}
+
+
 def instructions(checkout: Path, cache: Path, script: Path, kind: str, n: int) -> int:
     """Instructions of one process running ``kind`` with ``n`` spheres (0: the warm-up alone)."""
     env = {**os.environ, "XDG_CACHE_HOME": str(cache), "PYTHONPATH": str(checkout), "NUMBA_CPU_NAME": "generic",
-           "NUMBA_CPU_FEATURES": ""}
+           "NUMBA_CPU_FEATURES": "", "PYTHONHASHSEED": "0", **SINGLE_THREADED}
     command = ["valgrind", "--tool=cachegrind", "--cache-sim=no", "--cachegrind-out-file=/dev/null",
                sys.executable, str(script), str(checkout), kind, str(n)]
     done = subprocess.run(command, env=env, capture_output=True, text=True, check=True)
     return int(re.search(r"I\s+refs:\s+([\d,]+)", done.stderr).group(1).replace(",", ""))
+
+
+def net_instructions(checkout: Path, cache: Path, script: Path, kind: str, n: int) -> int:
+    """Instructions of the task alone: one process with it less the median of three with the warm-up alone.
+    A process with the warm-up alone executes one of two counts some 1.5 % apart from run to run (with
+    the task, the count repeats to 0.02 %); the median takes the more frequent."""
+    warm_ups = sorted(instructions(checkout, cache, script, kind, 0) for _ in range(3))
+    return instructions(checkout, cache, script, kind, n) - warm_ups[1]
 
 
 def compile_natively(checkout: Path, cache: Path, script: Path, kinds: list[str]) -> None:
@@ -92,8 +106,7 @@ def main() -> int:
             net = {}
             for name in caches:
                 checkout = getattr(options, name).resolve()
-                net[name] = (instructions(checkout, caches[name], script, kind, n)
-                             - instructions(checkout, caches[name], script, kind, 0))
+                net[name] = net_instructions(checkout, caches[name], script, kind, n)
             print(f"{kind + ' ' + str(n):<28} {net['old'] / 1e9:>18.3f} {net['new'] / 1e9:>18.3f}"
                   f" {net['new'] / net['old']:>8.4f}", flush=True)
     return 0

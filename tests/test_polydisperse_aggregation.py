@@ -9,10 +9,9 @@ import pytest
 import xarray as xr
 
 import parsim
-from parsim.comparison import method_comparison
-from parsim.output.dataset import decoded
 from parsim.core.statistics import contact_pairs, mass_radius_of_gyration
 from parsim.errors import JobError
+from tests.method_agreement import assert_time_stepping_agrees
 
 
 @pytest.mark.parametrize("method, dimension, n, fraction", [("ed", 2, 100, 0.1), ("ts", 2, 64, 0.1),
@@ -142,14 +141,4 @@ def test_time_stepping_agrees_with_event_driven_on_lognormal_monomers(tmp_path):
            "parameters": {"dimension": 2, "radius_distribution": "lognormal", "radius_geometric_std": 1.3},
            "sweep": {"method": ["ed", "ts"], "n_spheres": [100, 400], "volume_fraction": [0.05, 0.1]}}
     dataset = parsim.run(job, output=tmp_path / "poly", progress=False)
-    assert (dataset.n_clusters == 1).all()
-    rows = method_comparison(dataset)
-    errors = [row["e(D_f)"] for row in rows]
-    assert max(errors) <= 0.05 and np.mean(errors) <= 0.03, errors
-    for row in rows:
-        assert 0.45 < row["N_c ED"] < 0.6 and 0.45 < row["N_c TS"] < 0.65, row
-    named = decoded(dataset, ["method"])
-    ed, ts = named.sel({"method": "ed"}).aspect_ratio, named.sel({"method": "ts"}).aspect_ratio
-    spread = np.sqrt(ed.var("realization", ddof=1) / ed.sizes["realization"]
-                     + ts.var("realization", ddof=1) / ts.sizes["realization"])
-    assert (abs(ed.mean("realization") - ts.mean("realization")) <= 2.5 * spread).all()
+    assert_time_stepping_agrees(dataset, contacts_ed=(0.45, 0.6), contacts_ts=(0.45, 0.65))

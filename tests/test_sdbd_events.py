@@ -571,8 +571,8 @@ def test_a_tangent_contact_opens_as_its_gap_does(excess):
     D = 1.0 + excess
     s = np.array([1.0 - D, 0.0, 0.0])
     normal = (a - s) / D
-    contacts = (a[None], s[None], normal[None], np.array([D]), np.zeros(1), np.array([OB_SPHERE], dtype=np.int8))
-    opens = contact_opens(0, tuple(pivot), tuple(axis), contacts, 1.0)
+    opens = contact_opens(0, tuple(pivot), tuple(axis), a[None], normal[None], np.array([OB_SPHERE], dtype=np.int8),
+                          np.array([D]), 1.0)
     gap_later = np.linalg.norm(rotate(a, pivot, axis, 0.1)[0] - s) - D
     assert opens == (gap_later > 0.0), (excess, gap_later)
     phi, _, _ = ev.sphere_contact_angle(a, pivot, axis, s, D, 1.0, ev.POLICY_NEW)

@@ -100,11 +100,9 @@ _SAME_PIVOT = 1e-9
 
 
 @jit(inline="always")
-def contact_opens(l, pivot, axis, contacts, ell):
+def contact_opens(l, pivot, axis, ca, cN, ckind, cD, ell):
     """Does contact ``l`` open (or stay closed) under the rotation ``omega = axis`` about ``pivot``
-    (both ``(x, y, z)``)?  ``contacts`` are the arrays of the contact geometry,
-    ``(ca, cP, cN, cD, cc0, ckind)`` (:func:`.bundles.geometry_arrays`)."""
-    ca, _, cN, cD, _, ckind = contacts
+    (both ``(x, y, z)``)?  ``ca, cN, ckind, cD`` are the contact geometry's arrays (module docs)."""
     p0, p1, p2 = pivot
     w0, w1, w2 = axis
     r0 = ca[l, 0] - p0
@@ -139,12 +137,13 @@ def gap_curvature(l, r0, r1, r2, w0, w1, w2, cN, ckind, cD):
 
 
 @jit(inline="always")
-def _all_open(n_c, skip1, skip2, pivot, axis, contacts, ell):
-    """Does every contact but ``skip1`` and ``skip2`` open under the rotation (:func:`contact_opens`)?"""
+def _all_open(n_c, skip1, skip2, pivot, axis, ca, cN, ckind, cD, ell):
+    """Does every contact but ``skip1`` and ``skip2`` open under the rotation about ``pivot``
+    (:func:`contact_opens`)?"""
     for l in range(n_c):
         if l == skip1 or l == skip2:
             continue
-        if not contact_opens(l, pivot, axis, contacts, ell):
+        if not contact_opens(l, pivot, axis, ca, cN, ckind, cD, ell):
             return False
     return True
 
@@ -206,41 +205,33 @@ def decide(com, n_c, geometry, ell, sliding_walls, out):
     For a rotation, ``out[0:3]`` is the unit axis (rotation sense: positive angle) and
     ``out[3:6]`` a point of it (the pivot ``P_k``, or for a pair with a frictionless wall the
     other contact's pivot); ``k`` (and ``m`` for a pair) are the pivot contacts, ``-1``
-    otherwise.  The steepest valid rotation on one contact (3.2) is sought first, then a steeper
-    one on two (3.3); with neither, an unstable equilibrium is tipped, or the particle rests.
+    otherwise.
+
+    The steps, in order: the fall (3.1); the steepest valid rotation on one contact (3.2); a
+    steeper one on two (3.3); with neither, the tipping of an unstable equilibrium above one
+    pivot or above the axis of two; else rest.
+
+    Why so long: the decision runs at every step of every descent.  Split into those five steps
+    as inlined functions, together with the contact search of a rotation
+    (:func:`.rolling.roll`'s), it made a deposition of 2·10⁴ spheres execute 4.5 % more instructions
+    (benchmarks/side_by_side.py), so the steps stay one function with a comment at the head of each.
     """
-    contacts = geometry_arrays(geometry)
-    _, cP, cN, _, _, _ = contacts
-    if _may_fall(n_c, cN):
+    ca, cP, cN, cD, cc0, ckind = geometry_arrays(geometry)
+    if n_c == 0:
         return MOTION_FALL, -1, -1, 1.0
-    best, k = _steepest_single(com, n_c, contacts, ell, sliding_walls, out)
-    motion, bk, bm, base = (MOTION_SINGLE, k, -1, k) if k >= 0 else (MOTION_REST, -1, -1, -1)
-    best, k, m, b = _steepest_pair(com, n_c, contacts, ell, sliding_walls, best, out)
-    if k >= 0:
-        motion, bk, bm, base = MOTION_PAIR, k, m, b
-    if motion == MOTION_REST:
-        return _tipped(com, n_c, contacts, ell, sliding_walls, out)
-    for q in range(3):
-        out[3 + q] = cP[base, q]
-    return motion, bk, bm, best
-
-
-@jit(inline="always")
-def _may_fall(n_c, cN):
-    """The fall (3.1) is allowed: no contact, or every contact normal has ``N_z <= NZ_TOL``."""
+    fall = True
     for l in range(n_c):
         if cN[l, 2] > NZ_TOL:
-            return False
-    return True
-
-
-@jit(inline="always")
-def _steepest_single(com, n_c, contacts, ell, sliding_walls, out):
-    """The steepest valid descending rotation on one contact (3.2, eq. 6; on a frictionless wall alone
-    it is the fall, tested before): ``(slope, k)``, its axis in ``out[0:3]``, or ``(-1, -1)``."""
-    _, cP, _, _, _, ckind = contacts
+            fall = False
+            break
+    if fall:
+        return MOTION_FALL, -1, -1, 1.0
     best = -1.0
+    motion = MOTION_REST
     bk = -1
+    bm = -1
+    base = -1  # the contact whose pivot lies on the chosen axis
+    # rotation on one contact (on a frictionless wall alone: the fall, tested above)
     for k in range(n_c):
         if _slides(ckind, k, sliding_walls):
             continue
@@ -252,22 +243,16 @@ def _steepest_single(com, n_c, contacts, ell, sliding_walls, out):
             continue
         w0 = -d1 / dh
         w1 = d0 / dh
-        if _all_open(n_c, k, -1, (cP[k, 0], cP[k, 1], cP[k, 2]), (w0, w1, 0.0), contacts, ell):
+        if _all_open(n_c, k, -1, (cP[k, 0], cP[k, 1], cP[k, 2]), (w0, w1, 0.0), ca, cN, ckind, cD, ell):
             best = slope
+            motion = MOTION_SINGLE
             bk = k
+            bm = -1
+            base = k
             out[0] = w0
             out[1] = w1
             out[2] = 0.0
-    return best, bk
-
-
-@jit(inline="always")
-def _steepest_pair(com, n_c, contacts, ell, sliding_walls, best, out):
-    """The valid descending rotation on two contacts (3.3, eq. 24) steeper than ``best`` and than
-    every other: ``(slope, k, m, b)``, ``b`` the contact whose pivot lies on its axis, written into
-    ``out[0:3]``; ``(best, -1, -1, -1)`` if there is none."""
-    _, cP, cN, _, _, ckind = contacts
-    bk = bm = base = -1
+    # rotation on two contacts
     for k in range(n_c):
         for m in range(k + 1, n_c):
             ok, u0, u1, u2, b = _pair_axis(cP, cN, ckind, k, m, sliding_walls, ell)
@@ -286,97 +271,76 @@ def _steepest_pair(com, n_c, contacts, ell, sliding_walls, best, out):
             if slope <= best + STEEP_TOL:
                 continue
             sg = -1.0 if x2 > 0.0 else 1.0
-            if _all_open(n_c, k, m, (cP[b, 0], cP[b, 1], cP[b, 2]), (sg * u0, sg * u1, sg * u2), contacts, ell):
+            if _all_open(n_c, k, m, (cP[b, 0], cP[b, 1], cP[b, 2]), (sg * u0, sg * u1, sg * u2), ca, cN, ckind, cD,
+                         ell):
                 best = slope
+                motion = MOTION_PAIR
                 bk = k
                 bm = m
                 base = b
                 out[0] = sg * u0
                 out[1] = sg * u1
                 out[2] = sg * u2
-    return best, bk, bm, base
-
-
-@jit(inline="always")
-def _tipped(com, n_c, contacts, ell, sliding_walls, out):
-    """No rotation descends: a centre of mass straight above a pivot, or above the axis of two
-    (an unstable equilibrium), is tipped about a fixed horizontal axis (x, then y) if that is
-    valid; otherwise the particle rests.  Returns what :func:`decide` returns."""
-    k = _tipped_single(com, n_c, contacts, ell, sliding_walls, out)
-    if k >= 0:
-        return MOTION_SINGLE, k, -1, 0.0
-    k, m = _tipped_pair(com, n_c, contacts, ell, sliding_walls, out)
-    if k >= 0:
-        return MOTION_PAIR, k, m, 0.0
-    return MOTION_REST, -1, -1, 0.0
-
-
-@jit(inline="always")
-def _tipped_single(com, n_c, contacts, ell, sliding_walls, out):
-    """The pivot ``k`` straight below the centre of mass about which a horizontal axis tips it, its
-    axis and pivot in ``out``, or -1."""
-    _, cP, _, _, _, ckind = contacts
-    for k in range(n_c):
-        if _slides(ckind, k, sliding_walls):
-            continue
-        d0, d1, d2, dn, dh = _offset_from_pivot(com, cP, k)
-        if dn <= TINY * ell or _descends(dh, dn, ell) or d2 <= 0.0:
-            continue
-        for t in range(4):
-            w0 = 0.0
-            w1 = 0.0
-            if t == 0:
-                w0 = 1.0
-            elif t == 1:
-                w1 = 1.0
-            elif t == 2:
-                w0 = -1.0
-            else:
-                w1 = -1.0
-            if _all_open(n_c, k, -1, (cP[k, 0], cP[k, 1], cP[k, 2]), (w0, w1, 0.0), contacts, ell):
-                out[0] = w0
-                out[1] = w1
-                out[2] = 0.0
-                for q in range(3):
-                    out[3 + q] = cP[k, q]
-                return k
-    return -1
-
-
-@jit(inline="always")
-def _tipped_pair(com, n_c, contacts, ell, sliding_walls, out):
-    """The pair ``(k, m)`` whose axis lies straight below the centre of mass (the top of its circle)
-    and tips it, its axis and a point of it in ``out``, or ``(-1, -1)``."""
-    _, cP, cN, _, _, ckind = contacts
-    for k in range(n_c):
-        for m in range(k + 1, n_c):
-            ok, u0, u1, u2, b = _pair_axis(cP, cN, ckind, k, m, sliding_walls, ell)
-            if not ok:
+    if motion == MOTION_REST:
+        # unstable equilibria: centre of mass straight above a pivot
+        for k in range(n_c):
+            if _slides(ckind, k, sliding_walls):
                 continue
-            if 1.0 - abs(u2) <= DESCENT_TOL:
-                continue  # vertical axis: no height change
-            d0 = com[0] - cP[b, 0]
-            d1 = com[1] - cP[b, 1]
-            d2 = com[2] - cP[b, 2]
-            h = d0 * u0 + d1 * u1 + d2 * u2
-            p0 = d0 - h * u0
-            p1 = d1 - h * u1
-            p2 = d2 - h * u2
-            pn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
-            if pn <= DESCENT_RATE_TOL * ell:
-                continue  # on the axis: no rotation about it lowers the centre of mass
-            x2 = u0 * p1 - u1 * p0  # (u x d)_z
-            # above: the offset from the axis points up (ez . p > 0) and is normal to
-            # the descent direction
-            if _descends(abs(x2), pn, ell) or p2 <= 0.0:
+            d0, d1, d2, dn, dh = _offset_from_pivot(com, cP, k)
+            if dn <= TINY * ell or _descends(dh, dn, ell) or d2 <= 0.0:
                 continue
-            for t in range(2):
-                sg = 1.0 if t == 0 else -1.0
-                if _all_open(n_c, k, m, (cP[b, 0], cP[b, 1], cP[b, 2]), (sg * u0, sg * u1, sg * u2), contacts, ell):
-                    out[0] = sg * u0
-                    out[1] = sg * u1
-                    out[2] = sg * u2
+            for t in range(4):
+                w0 = 0.0
+                w1 = 0.0
+                if t == 0:
+                    w0 = 1.0
+                elif t == 1:
+                    w1 = 1.0
+                elif t == 2:
+                    w0 = -1.0
+                else:
+                    w1 = -1.0
+                if _all_open(n_c, k, -1, (cP[k, 0], cP[k, 1], cP[k, 2]), (w0, w1, 0.0), ca, cN, ckind, cD, ell):
+                    out[0] = w0
+                    out[1] = w1
+                    out[2] = 0.0
                     for q in range(3):
-                        out[3 + q] = cP[b, q]
-                    return k, m
-    return -1, -1
+                        out[3 + q] = cP[k, q]
+                    return MOTION_SINGLE, k, -1, 0.0
+        # ... or straight above the axis of two pivots (top of its circle)
+        for k in range(n_c):
+            for m in range(k + 1, n_c):
+                ok, u0, u1, u2, b = _pair_axis(cP, cN, ckind, k, m, sliding_walls, ell)
+                if not ok:
+                    continue
+                if 1.0 - abs(u2) <= DESCENT_TOL:
+                    continue  # vertical axis: no height change
+                d0 = com[0] - cP[b, 0]
+                d1 = com[1] - cP[b, 1]
+                d2 = com[2] - cP[b, 2]
+                h = d0 * u0 + d1 * u1 + d2 * u2
+                p0 = d0 - h * u0
+                p1 = d1 - h * u1
+                p2 = d2 - h * u2
+                pn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+                if pn <= DESCENT_RATE_TOL * ell:
+                    continue  # on the axis: no rotation about it lowers the centre of mass
+                x2 = u0 * p1 - u1 * p0  # (u x d)_z
+                # above: the offset from the axis points up (ez . p > 0) and is normal to
+                # the descent direction
+                if _descends(abs(x2), pn, ell) or p2 <= 0.0:
+                    continue
+                for t in range(2):
+                    sg = 1.0 if t == 0 else -1.0
+                    if _all_open(n_c, k, m, (cP[b, 0], cP[b, 1], cP[b, 2]), (sg * u0, sg * u1, sg * u2), ca, cN,
+                                 ckind, cD, ell):
+                        out[0] = sg * u0
+                        out[1] = sg * u1
+                        out[2] = sg * u2
+                        for q in range(3):
+                            out[3 + q] = cP[b, q]
+                        return MOTION_PAIR, k, m, 0.0
+        return MOTION_REST, -1, -1, 0.0
+    for q in range(3):
+        out[3 + q] = cP[base, q]
+    return motion, bk, bm, best
