@@ -203,3 +203,28 @@ def test_the_collector_runs_less_often_only_while_a_kernel_compiles(tmp_path):
     assert report["parsim"] == {"during": [compiling], "after": own}
     assert report["failed"] == {"during": [compiling], "after": own}  # a typing error ends the compilation too
     assert report["other"] == {"during": [own], "after": own}  # a function outside parsim/core: untouched
+
+
+def test_an_index_naming_a_class_that_is_gone_is_stale(tmp_path):
+    """A cache index whose signatures name a class the sources no longer have (a bundle renamed since
+    the kernels were cached, e.g. by an upgrade) is stale: the kernel is compiled again, the load
+    does not fail."""
+    import pickle
+
+    import parsim.core.eventqueue as module
+
+    first = probe(tmp_path, XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    (index,) = Path(first["cache_path"]).glob("eventqueue.heap_new-*.nbi")
+    with open(index, "rb") as file:
+        version = pickle.load(file)
+    renamed = type("RenamedBundle", (), {"__module__": module.__name__})
+    module.RenamedBundle = renamed
+    try:
+        payload = pickle.dumps((_core_sources_digest(), {("signature naming it", renamed()): "old.nbc"}))
+    finally:
+        del module.RenamedBundle
+    index.write_bytes(pickle.dumps(version) + payload)
+
+    again = probe(tmp_path, XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    assert again["misses"] == 1 and again["shape"] == [4, 5]
+    assert probe(tmp_path, XDG_CACHE_HOME=str(tmp_path / "xdg"))["hits"] == 1

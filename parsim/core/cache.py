@@ -21,6 +21,8 @@ kernels are therefore cached per user, outside the package::
   just the kernel's own file: numba compiles callees from other modules into the
   caller's machine code but checks only the caller's file, so an edit in a callee module
   would otherwise go unnoticed. Any edit in ``parsim/core`` recompiles the kernels.
+- An index that cannot be read, such as one whose signatures name a bundle renamed since it
+  was written (numba unpickles an index before it compares stamps), is stale too.
 
 Only functions defined in ``parsim/core`` are concerned (a locator registered in front of
 numba's own); other numba functions in the same process keep numba's defaults.
@@ -35,6 +37,7 @@ is always safe.
 import functools
 import hashlib
 import os
+import pickle
 import re
 import tempfile
 from pathlib import Path
@@ -156,9 +159,37 @@ class ParsimCacheLocator(caching._CacheLocator):
         return self
 
 
+#: What unpickling an index raises when its signatures name a class or module the sources no longer
+#: have (a bundle renamed since the kernels were cached), or when the file is cut short
+_UNREADABLE_INDEX = (AttributeError, ImportError, EOFError, pickle.UnpicklingError)
+
+
+def _stale_if_unreadable(load_index):
+    """numba's index loader, for which an index of parsim's kernels that cannot be unpickled is stale
+    (an empty index: the kernel is compiled again and the index rewritten), as one of other sources
+    is.  numba unpickles an index before it compares its source stamp, so an index written by other
+    sources can name what these sources lack."""
+
+    @functools.wraps(load_index)
+    def load(self):
+        try:
+            return load_index(self)
+        except _UNREADABLE_INDEX:
+            if Path(self._index_path).resolve().is_relative_to(kernel_cache_dir().resolve()):
+                return {}
+            raise
+
+    load.parsim_tolerant = True
+    return load
+
+
 def install():
-    """Put :class:`ParsimCacheLocator` in front of numba's locators (once)."""
+    """Put :class:`ParsimCacheLocator` in front of numba's locators (once), and make an unreadable
+    index of parsim's kernels stale (:func:`_stale_if_unreadable`)."""
     impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
     locators = impl._locator_classes
     if not any(cls.__name__ == ParsimCacheLocator.__name__ for cls in locators):
         locators.insert(0, ParsimCacheLocator)
+    index_file = caching.IndexDataCacheFile
+    if not getattr(index_file._load_index, "parsim_tolerant", False):
+        index_file._load_index = _stale_if_unreadable(index_file._load_index)
