@@ -132,7 +132,8 @@ def roll(n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_c
         counters.stop(work.counters, counters.TRIAL, started)
         counters.add(work.counters, counters.TRIAL_DECISIONS, 1)
         if changes:
-            n_t, best = push_event(n_t, best, tol_phi, (trial_angle, math.cos(trial_angle), math.sin(trial_angle)), EV_TRIAL, NO_CONTACT, window)
+            n_t, best = push_event(n_t, best, tol_phi, (trial_angle, math.cos(trial_angle), math.sin(trial_angle)),
+                                   EV_TRIAL, NO_CONTACT, window)
     started = counters.start(work.counters)
     n_t, best, buf = _new_contact_events(n, particle, (n_pivots, n_dr), work, (axis, pivot), sediment, grid,
                                          settings, (n_t, best, tol_phi), buf)
@@ -194,7 +195,8 @@ def _end_of_arc(n, particle, axis, pivot, ell, geom, igeom, window):
     if phi_hang <= phi_lim:
         n_t, best = push_event(n_t, best, tol_phi, (phi_hang, c_hang, s_hang), EV_HANG, NO_CONTACT, window)
     else:
-        n_t, best = push_event(n_t, best, tol_phi, (phi_lim, math.cos(phi_lim), math.sin(phi_lim)), EV_CHUNK, NO_CONTACT, window)
+        n_t, best = push_event(n_t, best, tol_phi, (phi_lim, math.cos(phi_lim), math.sin(phi_lim)),
+                               EV_CHUNK, NO_CONTACT, window)
     return n_t, best, tol_phi
 
 
@@ -282,7 +284,8 @@ def _release_events(com, k, m, work, axis, pivot, settings, n_t, best, tol_phi):
             if B > RATE_TOL * ell / rho:
                 # eq. 31: release condition holds with zero rate and the decision found the
                 # contact not opening: rotate a little
-                n_t, best = push_event(n_t, best, tol_phi, (virtual, math.cos(virtual), math.sin(virtual)), EV_VIRTUAL, NO_CONTACT, window)
+                n_t, best = push_event(n_t, best, tol_phi, (virtual, math.cos(virtual), math.sin(virtual)),
+                                       EV_VIRTUAL, NO_CONTACT, window)
                 continue
         elif gap < 0.0:
             continue
@@ -378,7 +381,8 @@ def _new_contact_events(n, particle, known, work, rotation, sediment, grid, sett
                 gap = pos[i, 2] - ri
                 phi, cc, ss = first_entry(A, B, A + gap / rho, gap, 1.0 / rho, ell, pol, lim, cos_lim)
                 if phi <= best + tol_phi:
-                    n_t, best = push_event(n_t, best, tol_phi, (phi, cc, ss), EV_CONTACT, (i, OB_FLOOR, -1, 0.0, 0.0), window)
+                    n_t, best = push_event(n_t, best, tol_phi, (phi, cc, ss),
+                                           EV_CONTACT, (i, OB_FLOOR, -1, 0.0, 0.0), window)
         if walls and n_sides > 0:
             arc = (o0 + xlo, o0 + xhi, o1 + ylo, o1 + yhi, o2 + zlo, o2 + zhi)
             n_t, best = _side_contact_events(i, pos, ri, rho, arc, known, work, geom, n_sides, ell,
@@ -451,7 +455,8 @@ def _new_contact_events(n, particle, known, work, rotation, sediment, grid, sett
             counters.add(work.counters, counters.ROLL_ENTRIES, 1)
             phi, cc, ss = first_entry(A, B, K, gap, dist / rho, ell, pol, lim, cos_lim)
             if phi <= best + tol_phi:
-                n_t, best = push_event(n_t, best, tol_phi, (phi, cc, ss), EV_CONTACT, (i, OB_SPHERE, j, mx - rx, my - ry), window)
+                n_t, best = push_event(n_t, best, tol_phi, (phi, cc, ss),
+                                       EV_CONTACT, (i, OB_SPHERE, j, mx - rx, my - ry), window)
     return n_t, best, buf
 
 
