@@ -9,6 +9,7 @@ import trimesh
 
 from parsim.deposition.mesh_file import mesh_properties, particle_from_mesh_file
 from parsim.core.shapes.union import centre_of_mass_of_union
+from tests.mesh_files import write
 
 # Accuracy of centre_of_mass_of_union at its default resolution (documented: below 2e-4
 # relative volume; margin x1.5), as in tests/test_shapes.py.
@@ -17,16 +18,6 @@ UNION_VOLUME_RTOL = 3e-4
 INSIDE_RTOL = 1e-9
 ELLIPSOID_AXES = (3.0, 2.0, 1.0)
 BOX_HALF = np.array([1.0, 0.5, 0.25])
-
-
-def write(mesh, folder, name):
-    """Write ``mesh`` to folder/name (STL or OBJ by the suffix; OBJ with all digits)."""
-    path = folder / name
-    if name.endswith(".obj"):
-        mesh.export(path, digits=17)
-    else:
-        mesh.export(path)
-    return str(path)
 
 
 def ellipsoid_mesh():

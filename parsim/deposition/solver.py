@@ -33,6 +33,7 @@ from parsim.phases import phase
 from parsim.progress import settled_reporter
 from parsim.solver import LENGTH_UNITS, Configuration, Solver, TableArray, TaskResult
 from parsim.deposition import statistics
+from parsim.deposition.vessel import Vessel, read_vessel
 from parsim.deposition.materials import (
     SPECIES_KEYS,
     Drops,
@@ -46,7 +47,7 @@ from parsim.deposition.materials import (
 
 SHAPES = ("sphere", "rod", "four_rods", "tripod", "spiky", "cube", "ellipsoid", "superellipsoid", "agglomerate",
           "mesh")
-CONTAINERS = ("box", "cylinder")
+CONTAINERS = ("box", "cylinder", "mesh")
 LATERAL = {"periodic": sdbd.LATERAL_PERIODIC, "walls": sdbd.LATERAL_WALLS, "none": sdbd.LATERAL_NONE}
 FLOOR = {"stop": sdbd.FLOOR_STOP, "roll": sdbd.FLOOR_ROLL}
 WALL_CONTACTS = {"frictionless": sdbd.WALL_FRICTIONLESS, "glued": sdbd.WALL_GLUED}
@@ -143,8 +144,9 @@ _AGGLOMERATE = _ReadWhen("shape", ("agglomerate",))
 _MESH = _ReadWhen("shape", ("mesh",))
 _IN_BOX = _ReadWhen("container", ("box",))
 _CYLINDER = _ReadWhen("container", ("cylinder",))
+_VESSEL = _ReadWhen("container", ("mesh",))
 _BOXED = _ReadWhenAll((_IN_BOX, _ReadWhen("lateral", ("periodic", "walls"))))
-_WALLED = _ReadWhenAny((_CYLINDER, _ReadWhenAll((_IN_BOX, _ReadWhen("lateral", ("walls",))))))
+_WALLED = _ReadWhenAny((_CYLINDER, _VESSEL, _ReadWhenAll((_IN_BOX, _ReadWhen("lateral", ("walls",))))))
 _HEAP = _ReadWhenAll((_IN_BOX, _ReadWhen("lateral", ("none",))))
 _SPREAD = _ReadWhen("size_distribution", ("uniform", "lognormal"))
 _SIEVE = _ReadWhen("size_distribution", ("sieve",))
@@ -189,7 +191,12 @@ PARAMETERS = (
               low=0.0, low_inclusive=False, high=LARGEST_QUANTITY),
     Parameter("container", str, "box", "1", "box (lateral boundaries set by lateral) or cylinder (a vertical "
               "cylinder of container_radius about (container_radius, container_radius), its wall frictionless or "
-              "glued as wall_contact says)", choices=CONTAINERS),
+              "glued as wall_contact says) or mesh (the vessel of container_file: an open-topped surface mesh whose "
+              "inside is convex, its faces walls as wall_contact says)", choices=CONTAINERS),
+    Parameter("container_file", str, "", "1", "surface mesh (STL or OBJ) of the vessel: closed but for its opening at "
+              "the top, its inside convex, no face overhanging; moved so that its bounding box starts at the origin, "
+              "in the job's length units; particles are dropped inside its opening", is_file=True,
+              read_when=_VESSEL),
     Parameter("box_length", float, 50.0, LENGTH_UNITS, "side of the square bottom [0, box_length]^2 "
               "(periodic or walled)", low=0.0, low_inclusive=False, high=LARGEST_QUANTITY, read_when=_BOXED),
     Parameter("lateral", str, "periodic", "1", "lateral boundaries of the box: periodic, walls (four rigid vertical "
@@ -204,7 +211,8 @@ PARAMETERS = (
     Parameter("substrate", str, "", "1", "fixed spheres the particles are deposited onto: CSV (x, y, z, r) or HDF5 "
               "(spheres/position, spheres/radius, e.g. a deposition task file, whose own substrate is included); "
               "\"\": the bare floor", is_file=True),
-    Parameter("wall_contact", str, "frictionless", "1", "wall contact model of the walls and the cylinder: "
+    Parameter("wall_contact", str, "frictionless", "1", "wall contact model of the walls, the cylinder and a "
+              "vessel's faces: "
               "frictionless "
               "(a sphere of infinite radius: the wall pushes only along its normal and a touching sphere slides "
               "along it) or glued (the wall holds the touching sphere's centre: it pivots about it, no sliding)",
@@ -268,6 +276,8 @@ def check(params: dict) -> None:
     sizes = _Sizes.of(species)
     if params["container"] == "cylinder":
         _check_cylinder(params, species, sizes)
+    elif params["container"] == "mesh":
+        _check_vessel(params, read_vessel(params["container_file"]), sizes)
     elif params["lateral"] != "none":
         _check_box(params, sizes)
     else:
@@ -324,6 +334,14 @@ def _check_cylinder(params: dict, species: tuple[Species, ...], sizes: _Sizes) -
                        f"the cylinder; allowed: container_radius > {sizes.extent / inscribed * radius:.6g}")
 
 
+def _check_vessel(params: dict, vessel, sizes: _Sizes) -> None:
+    """The largest particle fits through the vessel's opening: some point of it lies an extent from its rim."""
+    grid = np.stack(np.meshgrid(*(np.linspace(0.0, u, 201) for u in vessel.upper[:2])), axis=-1).reshape(-1, 2)
+    if not np.any(vessel.inside_opening(grid, sizes.extent)):
+        raise JobError(f"container_file = {params['container_file']!r}: the vessel's opening is too narrow for the "
+                       f"particles ({sizes.widest}); allowed: an opening wider than twice the particle extent")
+
+
 def _check_heap(params: dict, sizes: _Sizes) -> None:
     if params["drop_radius"] > MAX_HEAP_EXTENTS * sizes.extent:
         raise JobError(f"drop_radius = {params['drop_radius']!r}: allowed: at most {MAX_HEAP_EXTENTS:g} particle "
@@ -336,7 +354,7 @@ def _check_container(params: dict, geometry: "_Geometry", sizes: _Sizes, substra
     try:
         sdbd.check_container(geometry.lower, geometry.upper, geometry.lateral, sizes.largest_radius, sizes.extent,
                              sizes.length_scale, container=geometry.container, cylinder=geometry.cylinder,
-                             substrate_positions=substrate[0], substrate_radii=substrate[1])
+                             substrate_positions=substrate[0], substrate_radii=substrate[1], faces=geometry.faces())
     except ValueError as error:
         if "substrate sphere" in str(error):
             raise JobError(f"substrate = {params['substrate']!r}: {error} (spheres count from 0, in the order of "
@@ -353,7 +371,10 @@ def _check_grid_memory(params: dict, species: tuple[Species, ...], substrate) ->
     if params["container"] == "box" and params["lateral"] == "none":
         return
     size = _container_size_key(params)
-    width = 2.0 * params[size] if size == "container_radius" else params[size]
+    if size == "container_file":
+        width = float(np.max(read_vessel(params[size]).upper[:2]))
+    else:
+        width = 2.0 * params[size] if size == "container_radius" else params[size]
     cell = 2.0 * max(min(float(s.radii.max()) * s.smallest_scale() for s in species),
                      float(substrate[1].max(initial=0.0)))
     columns = math.floor(width / cell) ** 2
@@ -364,7 +385,7 @@ def _check_grid_memory(params: dict, species: tuple[Species, ...], substrate) ->
 
 
 def _container_size_key(params: dict) -> str:
-    return "container_radius" if params["container"] == "cylinder" else "box_length"
+    return {"cylinder": "container_radius", "mesh": "container_file"}.get(params["container"], "box_length")
 
 
 def container_sides(params: dict, species: tuple[Species, ...]) -> int:
@@ -531,7 +552,7 @@ def deposition_inputs(params: dict, rng: np.random.Generator, spread: bool = Fal
                    max_events_per_particle=params["max_events_per_particle"],
                    clock_from_particle=skip if skip < n else -1, container=geometry.container,
                    cylinder=geometry.cylinder, substrate_positions=substrate[0] if len(substrate[1]) else None,
-                   substrate_radii=substrate[1] if len(substrate[1]) else None)
+                   substrate_radii=substrate[1] if len(substrate[1]) else None, faces=geometry.faces())
     particles = _particle_chunks(params, species, geometry, rng, PARTICLE_CHUNK if spread else max(n, 1))
     return DepositionInputs(shapes, container, options, particles, species, geometry, substrate, skip)
 
@@ -608,9 +629,18 @@ class _Geometry:
     lower: np.ndarray  # the lateral box (the cylinder's bounding square)
     upper: np.ndarray
     cylinder: tuple | None = None  # (cx, cy, R, sides)
+    vessel: Vessel | None = None  # a mesh vessel, in the box of its bounding box
+
+    def faces(self):
+        """The kernel's ``faces`` of a mesh vessel (None for other containers)."""
+        return None if self.vessel is None else self.vessel.faces()
 
 
 def _container(params, species) -> _Geometry:
+    if params["container"] == "mesh":
+        vessel = read_vessel(params["container_file"])
+        return _Geometry(sdbd.CONTAINER_MESH, sdbd.LATERAL_WALLS, np.zeros(2), np.array(vessel.upper[:2]),
+                         vessel=vessel)
     if params["container"] == "cylinder":
         radius = params["container_radius"]
         return _Geometry(sdbd.CONTAINER_CYLINDER, sdbd.LATERAL_WALLS, np.zeros(2), np.full(2, 2.0 * radius),
@@ -628,6 +658,8 @@ def _drop_positions(params, geometry, species, drops, rng):
         if np.any(reach <= 0.0):
             raise NumericalError(f"a particle of size factor {drops.scale.max():.4g} does not fit in the cylinder")
         return _on_disc(rng.random((n, 2)), reach, (cx, cy))
+    if geometry.vessel is not None:
+        return _in_opening(geometry.vessel, extents[drops.species] * drops.scale, rng)
     if params["lateral"] == "none":
         return _on_disc(rng.random((n, 2)), params["drop_radius"], (0.0, 0.0))
     length = params["box_length"]
@@ -637,6 +669,23 @@ def _drop_positions(params, geometry, species, drops, rng):
             raise NumericalError(f"a particle of size factor {drops.scale.max():.4g} does not fit between the walls")
         return margin + rng.random((n, 2)) * (length - 2.0 * margin)
     return rng.random((n, 2)) * length
+
+
+def _in_opening(vessel, margins, rng):
+    """Points uniform over a vessel's opening, each at least its ``margin`` from the rim (the whole particle
+    starts inside, whatever its orientation): drawn as between walls, in the bounding box shrunk by the
+    margin, and redrawn where they miss the opening (an opening that is the box's square misses nothing)."""
+    if np.any(2.0 * margins >= np.min(vessel.upper[:2])):
+        raise NumericalError(f"a particle of extent {margins.max():.4g} does not fit in the vessel")
+    points = np.zeros((len(margins), 2))
+    missing = np.arange(len(margins))
+    for _ in range(1000):
+        if not len(missing):
+            return points
+        margin = margins[missing, None]
+        points[missing] = margin + rng.random((len(missing), 2)) * (vessel.upper[:2] - 2.0 * margin)
+        missing = missing[~vessel.inside_opening(points[missing], margins[missing])]
+    raise NumericalError(f"a particle of extent {margins.max():.4g} found no place in the vessel's opening")
 
 
 def _on_disc(uniform, radius, centre):
@@ -652,8 +701,9 @@ def _configuration(params, geometry, result, species, drops, substrate, comm=Non
     ``drops`` its particles', ``index`` their drop indices) of a sediment spread over the ranks of ``comm``
     (collective)."""
     top = float(np.max(result.positions[:, 2] + result.radii, initial=-np.inf))
-    periodic = geometry.cylinder is None and params["lateral"] == "periodic"
-    if geometry.cylinder is None and params["lateral"] == "none":  # the heap's extent
+    in_box = params["container"] == "box"
+    periodic = in_box and params["lateral"] == "periodic"
+    if in_box and params["lateral"] == "none":  # the heap's extent
         lower = (result.positions[:, :2] - result.radii[:, None]).min(axis=0, initial=np.inf)
         upper = (result.positions[:, :2] + result.radii[:, None]).max(axis=0, initial=-np.inf)
     else:
@@ -677,6 +727,10 @@ def _configuration(params, geometry, result, species, drops, substrate, comm=Non
              "shape_names": [s.name for s in species], "container": params["container"]}
     if geometry.cylinder is not None:
         attrs["cylinder"] = list(geometry.cylinder)  # centre x, y, radius, sides of the polygon
+    if geometry.vessel is not None:
+        attrs["vessel_volume"] = float(geometry.vessel.volume)  # closed at its rim, exact from the mesh
+        # the faces besides the box's walls and floor, as rows (N_x, N_y, N_z, c): inside is N . x >= c
+        attrs["vessel_planes"] = np.column_stack([geometry.vessel.normals, geometry.vessel.levels]).ravel().tolist()
     return Configuration(
         arrays={**arrays, "shapes/offsets": np.concatenate([s.offsets for s in species]),
                 "shapes/radius": np.concatenate([s.radii for s in species]),

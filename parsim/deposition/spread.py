@@ -54,8 +54,8 @@ The argument leans on three things that a run must not break, each of which once
   only when the receive is posted, so the array must live until the send completes
   (:func:`parsim.core.kernel_mpi.wait_slots` takes it).  Freed early, large parcels (particles of
   many spheres, dense halos) arrived as garbage: overlapping particles at the borders, or a crash.
-* *Nothing else is read.*  Walls, the cylinder's sides and the floor are the same on every rank;
-  particles of unequal radii read within their rectangle widened by the largest column, the grid's
+* *Nothing else is read.*  Walls, the cylinder's sides, a mesh vessel's faces and the floor are the same
+  on every rank; particles of unequal radii read within their rectangle widened by the largest column, the grid's
   cell being that of the serial run at the same particle (it grows only between windows); a heap's
   particles that roll out of the region are settled at the frontier on what every rank fetches.
 
@@ -252,7 +252,7 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
                      lateral, floor, trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
                      clock_from_particle=-1, wall_contact=sdbd.WALL_FRICTIONLESS, container=sdbd.CONTAINER_BOX,
                      cylinder=None, substrate_positions=None, substrate_radii=None, halo=None,
-                     window_per_rank=None, check=False, jitter=0.0, rehearsal=False) -> DecomposedDeposition:
+                     window_per_rank=None, check=False, jitter=0.0, rehearsal=False, faces=None) -> DecomposedDeposition:
     """:func:`deposit_decomposed` of particles that no rank holds all of: ``particle_chunks()`` yields
     ``(particle_shape, particle_scale, particle_rotation, particle_drop_xy)`` of consecutive particles in
     drop order, the same on every rank, and starts again from the first at every call (it is called
@@ -274,7 +274,8 @@ def deposit_streamed(comm, shape_offsets, shape_radii, shape_start, particle_chu
     the kernels take them in named groups."""
     settings = dict(trial_angle=trial_angle, cycle_n=cycle_n, cycle_eps=cycle_eps,
                     max_events_per_particle=max_events_per_particle, wall_contact=wall_contact, container=container,
-                    cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii)
+                    cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii,
+                    faces=faces)
     started = time.perf_counter()
     try:
         try:

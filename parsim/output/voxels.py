@@ -5,7 +5,7 @@ The image is a boolean array ``void[x, y, z]``, True where the voxel's centre li
 count per axis chosen so that the voxels tile the box exactly (the voxel size is adjusted along x
 and y by at most half a voxel over the box), and from the floor up to ``height`` (default: the
 top of the highest sphere).  Periodic axes wrap: a sphere across the box's side fills voxels on
-both sides.  Voxels outside a cylinder's circle are solid (not pore space).
+both sides.  Voxels outside a cylinder's circle or behind a mesh vessel's faces are solid (not pore space).
 
 The image is checked before any of it is made (:func:`image_grid`): the voxel size is a length
 > 0 at most the box's narrowest side, the height a length > 0, and the image with its temporaries
@@ -164,6 +164,7 @@ def voxelize(task, voxel_size: float, height: float | None = None) -> VoxelImage
     carve_spheres(void, np.ascontiguousarray(task.position), np.ascontiguousarray(task.radius), grid.origin,
                   grid.spacing, np.asarray(task.periodic, dtype=np.bool_))
     _mask_outside_cylinder(void, task, grid.origin, grid.spacing)
+    _mask_outside_vessel(void, task, grid.origin, grid.spacing)
     return VoxelImage(void, grid.origin, grid.spacing, task.length_unit)
 
 
@@ -177,6 +178,19 @@ def _mask_outside_cylinder(void, task, lower, spacing) -> None:
     y = lower[1] + (np.arange(void.shape[1]) + 0.5) * spacing[1] - radius
     inside = x[:, None] ** 2 + y[None, :] ** 2 <= radius**2
     void &= inside[:, :, None]
+
+
+def _mask_outside_vessel(void, task, lower, spacing) -> None:
+    """Voxels behind a mesh vessel's faces (``N . x < c`` at their centres) are solid, a layer at a time."""
+    if str(task.attrs.get("container", "box")) != "mesh":
+        return
+    planes = np.asarray(task.attrs["vessel_planes"], dtype=np.float64).reshape(-1, 4)
+    x = lower[0] + (np.arange(void.shape[0]) + 0.5) * spacing[0]
+    y = lower[1] + (np.arange(void.shape[1]) + 0.5) * spacing[1]
+    for k in range(void.shape[2]):
+        z = lower[2] + (k + 0.5) * spacing[2]
+        for nx, ny, nz, c in planes:
+            void[:, :, k] &= nx * x[:, None] + ny * y[None, :] + nz * z >= c
 
 
 def write_voxels(task, path, voxel_size: float | None = None, height: float | None = None) -> list:

@@ -14,7 +14,7 @@ two contacts, 3.2-3.3), :mod:`.frustration` (the trial rotation, 4.1), :mod:`.cy
 (criterion 34 and the creep test, 4.2), :mod:`.ties` (simultaneous events, 4.3); below
 them :mod:`.events` (event solvers), :mod:`.rotation` (eq. 15, eqs. 13-14),
 :mod:`.contacts` (contact lists), :mod:`.grid` (sediment grid), :mod:`.polygon` (the
-cylindrical container), :mod:`.overlap` (debug overlap measurement), :mod:`.bundles` (the
+cylindrical container), :mod:`.faces` and :mod:`.slide` (a mesh vessel's faces and the slide on them), :mod:`.overlap` (debug overlap measurement), :mod:`.bundles` (the
 named bundles of arrays) and :mod:`.constants`.
 
 The public entry point is :func:`deposit` (:mod:`.api`); :mod:`.inputs` checks its arguments and
@@ -67,6 +67,11 @@ lies in the polygon shrunk by its radius ``r``, whose vertices are ``R - r / cos
 <= R - r`` from the axis.  Only the sides within reach of a sphere are examined, so the cost per
 sphere does not grow with ``n_sides``.
 
+Mesh vessels (``CONTAINER_MESH``, ``faces``).  A vessel whose inside is convex is the walled box of
+its bounding box with the planes of its other faces (:mod:`.faces`), each a wall as above; a
+frictionless face that is not vertical adds the slide (:mod:`.slide`): on one such face the particle
+translates down its line of steepest descent, on two along their line, until a new contact.
+
 Substrate.  ``substrate_positions`` / ``substrate_radii`` are fixed spheres laid in the sediment
 before the first particle (sediment spheres ``0 .. m - 1``, wrapped into a periodic box): the
 particles drop above them and rest on them like on any sediment sphere; the grid's first cell
@@ -93,6 +98,7 @@ from parsim.core.sdbd.api import DepositionResult, deposit, deposit_with_diagnos
 from parsim.core.sdbd.constants import (
     CONTAINER_BOX,
     CONTAINER_CYLINDER,
+    CONTAINER_MESH,
     EVENT_KINDS,
     EVENT_LIMIT,
     FLOOR_ROLL,
@@ -128,6 +134,7 @@ __all__ = [
     "LATERAL_NONE",
     "CONTAINER_BOX",
     "CONTAINER_CYLINDER",
+    "CONTAINER_MESH",
     "MIN_CYLINDER_SIDES",
     "FLOOR_STOP",
     "FLOOR_ROLL",

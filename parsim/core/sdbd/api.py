@@ -57,7 +57,7 @@ def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_sc
             particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
             trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
             clock_from_particle=-1, wall_contact=WALL_FRICTIONLESS, container=CONTAINER_BOX, cylinder=None,
-            substrate_positions=None, substrate_radii=None, progress=None):
+            substrate_positions=None, substrate_radii=None, progress=None, faces=None):
     """Deposit particles one after the other by steepest descent; see the module docs.
 
     Parameters
@@ -100,7 +100,8 @@ def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_sc
         sphere's centre).
     container : int
         The lateral walls of LATERAL_WALLS: CONTAINER_BOX (the four faces of the box) or
-        CONTAINER_CYLINDER (a vertical cylinder, ``cylinder``).
+        CONTAINER_CYLINDER (a vertical cylinder, ``cylinder``) or CONTAINER_MESH (the box with the
+        inclined and vertical ``faces`` of a convex mesh vessel).
     cylinder : (cx, cy, radius, n_sides)
         With CONTAINER_CYLINDER (and only then): the cylinder of ``radius`` about the vertical
         axis through ``(cx, cy)``, modelled as the regular polygon of ``n_sides``
@@ -114,6 +115,13 @@ def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_sc
         like the deposited spheres, never moving.  Centres at ``z >= 0``; with walls each
         sphere lies inside the box or the cylinder's polygon; a periodic box wraps them.
         They are not part of the result.
+    faces : (normals, levels, boxes)
+        With CONTAINER_MESH (and only then): the faces of a vessel whose inside is convex, other
+        than those in the box's sides and in the floor ``z = 0`` (:mod:`.faces`): inward unit
+        ``normals`` (F, 3) with ``N_z >= 0``, ``levels`` (F,) (the face lies in ``N . x = c``) and
+        the bounding ``boxes`` (F, 6) ``x0, x1, y0, y1, z0, z1`` of the faces.  ``lateral`` must be
+        LATERAL_WALLS; every particle must start inside the faces that are vertical (it is dropped
+        above the others).
     progress : callable, optional
         Called as ``progress(settled)`` with the particles settled so far, from another thread,
         every ``PROGRESS_SECONDS`` while the run goes on (the kernel releases the GIL), and once
@@ -128,7 +136,7 @@ def deposit(shape_offsets, shape_radii, shape_start, particle_shape, particle_sc
         trial_angle, cycle_n, cycle_eps, max_events_per_particle,
         clock_from_particle=clock_from_particle, wall_contact=wall_contact, container=container,
         cylinder=cylinder, substrate_positions=substrate_positions, substrate_radii=substrate_radii,
-        progress=progress)[0]
+        progress=progress, faces=faces)[0]
 
 
 @contextlib.contextmanager
@@ -156,7 +164,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
                              wall_contact=WALL_FRICTIONLESS, check_overlaps=False,
                              trace_particle=-1, trace_steps=0, container=CONTAINER_BOX, cylinder=None,
                              substrate_positions=None, substrate_radii=None, count=False, record_reads=False,
-                             progress=None):
+                             progress=None, faces=None):
     """:func:`deposit` plus a dict of diagnostics, for tests and benchmarks.
 
     With ``check_overlaps`` the kernel measures, after every move, the largest overlap of
@@ -179,7 +187,7 @@ def deposit_with_diagnostics(shape_offsets, shape_radii, shape_start, particle_s
     prep = prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, particle_scale,
                               particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
                               trial_angle, cycle_n, cycle_eps, max_events_per_particle, wall_contact, container,
-                              cylinder, substrate_positions, substrate_radii)
+                              cylinder, substrate_positions, substrate_radii, faces=faces)
     P = len(prep.particle_shape)
     n_total = prep.n_spheres
     n_sub = len(prep.substrate_radii)

@@ -120,7 +120,8 @@ Settings = namedtuple("Settings", ["floor_mode", "trial_angle", "virtual_angle",
 #: Three-vectors and small arrays reused by every step: the rotation ``axis`` and a point
 #: ``pivot`` of it, the arc frame ``e1, e2``, plane normals ``normal, normal_2``, a rotated
 #: ``point``, the quaternions of a step and of the new orientation, and the outputs of two
-#: decisions (the present one and the trial of 4.1).
+#: decisions (the present one and the trial of 4.1: an axis or a slide's direction, a point of
+#: the axis, and room for a candidate slide's direction).
 Scratch = bundle("Scratch", ["axis", "pivot", "e1", "e2", "normal", "normal_2", "point",
                                  "q_step", "q_new", "decision", "trial_decision", "trial_com"])
 
@@ -148,7 +149,7 @@ Record = bundle("Record", ["particle", "com", "rotation", "contacts", "state", "
 # integers and a shift of two per row); and the scratch vectors.
 _LIST_ROWS = 2 * MAX_CONTACTS + 2
 _GEOMETRY_ROWS = MAX_CONTACTS + 2
-_SCRATCH_FLOATS = 7 * 3 + 2 * 4 + 2 * 8 + 3
+_SCRATCH_FLOATS = 7 * 3 + 2 * 4 + 2 * 9 + 3
 _WORKSPACE_FLOATS = 3 * _LIST_ROWS + 11 * _GEOMETRY_ROWS + 5 * MAX_TIES + _SCRATCH_FLOATS
 _WORKSPACE_INTS = 3 * _LIST_ROWS + _GEOMETRY_ROWS + 4 * MAX_TIES
 
@@ -200,8 +201,8 @@ def _scratch(floats, f):
     point, f = carve(floats, f, 3)
     q_step, f = carve(floats, f, 4)
     q_new, f = carve(floats, f, 4)
-    decision, f = carve(floats, f, 8)
-    trial_decision, f = carve(floats, f, 8)
+    decision, f = carve(floats, f, 9)
+    trial_decision, f = carve(floats, f, 9)
     trial_com, f = carve(floats, f, 3)
     return Scratch(axis, pivot, e1, e2, normal, normal_2, point, q_step, q_new, decision, trial_decision,
                    trial_com), f

@@ -21,16 +21,20 @@ LATERAL_NONE = 2
 # and the cell (the largest sphere diameter so far, also the layers' height), then from
 # GEOM_CONTAINER on the cylinder's polygon (:mod:`.polygon`). ``igeom`` (int64): the lateral
 # mode, the number of columns along x and y (periodic and walled boxes), the polygon's sides
-# (0 for the box).
+# (0 for the box), and the number of a mesh vessel's faces (:mod:`.faces`) that follow in ``geom``
+# instead of a polygon.
 GEOM_LOWER_X, GEOM_LOWER_Y, GEOM_LENGTH_X, GEOM_LENGTH_Y, GEOM_COLUMN_X, GEOM_COLUMN_Y, GEOM_CELL = range(7)
 GEOM_CONTAINER = 7
-IGEOM_MODE, IGEOM_COLUMNS_X, IGEOM_COLUMNS_Y, IGEOM_SIDES = range(4)
+IGEOM_MODE, IGEOM_COLUMNS_X, IGEOM_COLUMNS_Y, IGEOM_SIDES, IGEOM_FACES = range(5)
 
 #: The lateral walls of LATERAL_WALLS are the four faces of the box.
 CONTAINER_BOX = 0
 #: The lateral wall of LATERAL_WALLS is a cylinder, modelled as the regular polygon of planar
 #: walls inscribed in its circle (see :mod:`parsim.core.sdbd`).
 CONTAINER_CYLINDER = 1
+#: The lateral walls of LATERAL_WALLS are the box's faces, and inside them the inclined and
+#: vertical faces of a convex mesh vessel (:mod:`parsim.core.sdbd.faces`).
+CONTAINER_MESH = 2
 #: Fewest sides of the polygon that models a cylinder.
 MIN_CYLINDER_SIDES = 8
 
@@ -116,12 +120,17 @@ OB_WALL_YHI = 5
 #: A side of the polygon that models a cylinder; the contact's ``sediment`` field holds the
 #: side's index.  Like the box walls it is a plane with a horizontal normal (``>= OB_WALL_XLO``).
 OB_SIDE = 6
+#: A face of a convex mesh vessel (:mod:`.faces`), a plane of any inward normal whose ``z``
+#: component is not negative; the contact's ``sediment`` field holds the face's index.
+OB_FACE = 7
 
 # Motions chosen by the steepest-descent decision.
 MOTION_FALL = 0
 MOTION_SINGLE = 1
 MOTION_PAIR = 2
 MOTION_REST = 3
+#: A translation along frictionless inclined faces (:mod:`.slide`).
+MOTION_SLIDE = 4
 
 # Kinds of potential events of a rotation.
 EV_NONE = -1

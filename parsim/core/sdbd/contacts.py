@@ -1,9 +1,10 @@
 """Contacts of the moving particle, kept as parallel arrays (one row per contact).
 
 A contact is ``(i, ob, j, sh)``: moving sphere ``i`` touches an obstacle of kind ``ob``
-(``OB_SPHERE``, ``OB_FLOOR``, ``OB_WALL_*``, ``OB_SIDE``); for a sphere obstacle ``j`` is the
-sediment sphere and ``sh`` (row of 3, ``sh[2] = 0``) the periodic image shift that brings
-``sed[j]`` next to the particle; a side of the cylinder's polygon has its index in ``j``, the
+(``OB_SPHERE``, ``OB_FLOOR``, ``OB_WALL_*``, ``OB_SIDE``, ``OB_FACE``); for a sphere obstacle ``j``
+is the sediment sphere and ``sh`` (row of 3, ``sh[2] = 0``) the periodic image shift that brings
+``sed[j]`` next to the particle; a side of the cylinder's polygon or a face of a mesh vessel has
+its index in ``j``, the
 other planes ``j = -1``; planes have ``sh = 0``.  A list is a
 :class:`.bundles.ContactList` with its number of rows beside it.  The engine keeps three
 such lists: the contacts, the pivots of a rotation and the contacts released by the last
@@ -26,8 +27,10 @@ from parsim.core.sdbd.constants import (
     GEOM_LENGTH_Y,
     GEOM_LOWER_X,
     GEOM_LOWER_Y,
+    IGEOM_FACES,
     IGEOM_SIDES,
     MAX_CONTACTS,
+    OB_FACE,
     OB_FLOOR,
     OB_SIDE,
     OB_SPHERE,
@@ -37,6 +40,7 @@ from parsim.core.sdbd.constants import (
     OB_WALL_YLO,
     TOUCH_TOL,
 )
+from parsim.core.sdbd.faces import face_plane, face_within
 from parsim.core.sdbd.grid import grid_collect_growing, min_image
 from parsim.core.sdbd.polygon import candidate_sides, side_plane
 
@@ -53,8 +57,8 @@ __all__ = [
 
 @jit(inline="always")
 def plane_of(ob, j, r, geom, nrm):
-    """Normal (-> nrm) and level of the plane obstacle ``ob`` (a side of the cylinder: side
-    ``j``) for a sphere of radius ``r``: the sphere's centre ``a`` must satisfy
+    """Normal (-> nrm) and level of the plane obstacle ``ob`` (a side of the cylinder or a face of
+    a mesh vessel: side or face ``j``) for a sphere of radius ``r``: the sphere's centre ``a`` must satisfy
     ``nrm . a >= level``."""
     nrm[0] = 0.0
     nrm[1] = 0.0
@@ -73,6 +77,8 @@ def plane_of(ob, j, r, geom, nrm):
         return geom[GEOM_LOWER_Y] + r
     if ob == OB_SIDE:
         return side_plane(geom, j, r, nrm)
+    if ob == OB_FACE:
+        return face_plane(geom, j, r, nrm)
     nrm[1] = -1.0
     return -(geom[GEOM_LOWER_Y] + geom[GEOM_LENGTH_Y] - r)
 
@@ -237,6 +243,11 @@ def near_contacts(n, particle, n_c, contacts, sediment, grid, walls, ell, buf, n
             for t in range(count):
                 n_c, new = _close_plane(n_c, contacts, i, OB_SIDE, (first + t) % n_sides, pos, rad,
                                         geom, lim, nrm)
+                added += new
+        for face in range(igeom[IGEOM_FACES]):
+            if face_within(geom, face, (pos[i, 0], pos[i, 1], pos[i, 2]), (pos[i, 0], pos[i, 1], pos[i, 2]),
+                           rad[i] + lim):
+                n_c, new = _close_plane(n_c, contacts, i, OB_FACE, face, pos, rad, geom, lim, nrm)
                 added += new
     return n_c, added, floor_added, buf
 

@@ -85,7 +85,9 @@ from parsim.core.sdbd.constants import (
     MOTION_PAIR,
     MOTION_REST,
     MOTION_SINGLE,
+    MOTION_SLIDE,
     NZ_TOL,
+    OB_FACE,
     OB_SPHERE,
     OB_WALL_XLO,
     RATE_TOL,
@@ -196,6 +198,62 @@ def _pair_axis(cP, cN, ckind, k, m, sliding_walls, ell):
     return True, u0 / L, u1 / L, u2 / L, k
 
 
+@jit(inline="always")
+def _face_slide(k, m, cN, ckind, out):
+    """The slide on the frictionless planes of contacts ``k`` and ``m`` (``k = m``: on one) when
+    one of them is a mesh vessel's face: its unit direction -> ``out[6:9]`` and its slope
+    ``-dz/ds``, or ``-1`` when there is none that descends.
+
+    On one plane of inward normal ``N`` (``N_z > 0``) the particle translates down the line of
+    steepest descent, ``(N_z N - e_z) / sqrt(1 - N_z^2)``, slope ``sqrt(1 - N_z^2)``; on two, along
+    their line ``N_k x N_m``, the sense that descends.  Planes with horizontal normals alone
+    (walls, sides) give the fall, decided before."""
+    if ckind[k] != OB_FACE and ckind[m] != OB_FACE:
+        return -1.0
+    if k == m:
+        nz = cN[k, 2]
+        if nz <= NZ_TOL or nz >= 1.0 - DESCENT_TOL:
+            return -1.0
+        norm = math.sqrt(1.0 - nz * nz)
+        out[6] = nz * cN[k, 0] / norm
+        out[7] = nz * cN[k, 1] / norm
+        out[8] = (nz * nz - 1.0) / norm
+        return norm
+    u0 = cN[k, 1] * cN[m, 2] - cN[k, 2] * cN[m, 1]
+    u1 = cN[k, 2] * cN[m, 0] - cN[k, 0] * cN[m, 2]
+    u2 = cN[k, 0] * cN[m, 1] - cN[k, 1] * cN[m, 0]
+    un = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    if un <= TINY:
+        return -1.0
+    sg = -1.0 / un if u2 > 0.0 else 1.0 / un
+    out[6] = sg * u0
+    out[7] = sg * u1
+    out[8] = sg * u2
+    if -out[8] <= DESCENT_TOL:
+        return -1.0
+    return -out[8]
+
+
+@jit(inline="always")
+def _all_open_sliding(n_c, skip1, skip2, out, cN):
+    """Does every contact but ``skip1`` and ``skip2`` open, or stay tangent, under the slide along
+    ``out[6:9]``?  The rate of a gap is ``N . s``; at a tangent contact a sphere's gap grows at
+    second order and a plane's stays closed, so a rate above ``-RATE_TOL`` is enough."""
+    for l in range(n_c):
+        if l == skip1 or l == skip2:
+            continue
+        if cN[l, 0] * out[6] + cN[l, 1] * out[7] + cN[l, 2] * out[8] < -RATE_TOL:
+            return False
+    return True
+
+
+@jit(inline="always")
+def _keep_direction(out):
+    """The slide's direction, ``out[6:9]``, becomes the decision's ``out[0:3]``."""
+    for q in range(3):
+        out[q] = out[6 + q]
+
+
 @jit
 def decide(com, n_c, geometry, ell, sliding_walls, out):
     """Choose the motion of a particle with centre of mass ``com`` and ``n_c`` contacts of
@@ -231,9 +289,18 @@ def decide(com, n_c, geometry, ell, sliding_walls, out):
     bk = -1
     bm = -1
     base = -1  # the contact whose pivot lies on the chosen axis
-    # rotation on one contact (on a frictionless wall alone: the fall, tested above)
+    # rotation on one contact (on a frictionless wall alone: the fall, tested above; on a
+    # frictionless inclined face alone: the slide down it)
     for k in range(n_c):
         if _slides(ckind, k, sliding_walls):
+            slope = _face_slide(k, k, cN, ckind, out)
+            if slope > best + STEEP_TOL and _all_open_sliding(n_c, k, -1, out, cN):
+                best = slope
+                motion = MOTION_SLIDE
+                bk = k
+                bm = -1
+                base = k
+                _keep_direction(out)
             continue
         d0, d1, d2, dn, dh = _offset_from_pivot(com, cP, k)
         if dn <= TINY * ell or not _descends(dh, dn, ell):
@@ -257,6 +324,15 @@ def decide(com, n_c, geometry, ell, sliding_walls, out):
         for m in range(k + 1, n_c):
             ok, u0, u1, u2, b = _pair_axis(cP, cN, ckind, k, m, sliding_walls, ell)
             if not ok:
+                if _slides(ckind, k, sliding_walls) and _slides(ckind, m, sliding_walls):
+                    slope = _face_slide(k, m, cN, ckind, out)
+                    if slope > best + STEEP_TOL and _all_open_sliding(n_c, k, m, out, cN):
+                        best = slope
+                        motion = MOTION_SLIDE
+                        bk = k
+                        bm = m
+                        base = k
+                        _keep_direction(out)
                 continue
             d0 = com[0] - cP[b, 0]
             d1 = com[1] - cP[b, 1]

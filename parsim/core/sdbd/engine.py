@@ -6,9 +6,10 @@ sediment and :func:`_descend` repeats *decide, move* until it rests:
 1. **decide**: the geometry of the present contacts goes to :func:`.decision.decide`, which
    chooses the steepest valid motion: fall, rotation on one contact, rotation on two, or
    rest;
-2. **move**: :func:`.fall.fall` (3.1) or :func:`.rolling.roll` (3.2, 3.3, with the trial
-   rotation of 4.1 in :mod:`.frustration`), each up to its earliest event, executing the
-   events simultaneous with it (4.3);
+2. **move**: :func:`.fall.fall` (3.1), :func:`.rolling.roll` (3.2, 3.3, with the trial
+   rotation of 4.1 in :mod:`.frustration`) or, on frictionless inclined faces of a mesh vessel,
+   :func:`.slide.slide`, each up to its earliest event, executing the events simultaneous with
+   it (4.3);
 3. **contacts after a move**: the contacts are the pivots and the contacts the events made;
    contacts released by the decision that still touch (gap ``<= TOUCH_TOL``, a move of zero
    or round-off length) stay (:func:`.contacts.keep_touching`), so that a decision always
@@ -77,6 +78,7 @@ from parsim.core.sdbd.constants import (
     LATERAL_WALLS,
     MOTION_FALL,
     MOTION_REST,
+    MOTION_SLIDE,
     OB_FLOOR,
     OB_SPHERE,
     RESTING_ON_FLOOR,
@@ -94,6 +96,7 @@ from parsim.core.sdbd.particle import drop_particle, place_spheres
 from parsim.core.sdbd.polygon import GEOM_CONTAINER
 from parsim.core.sdbd.rolling import roll
 from parsim.core.sdbd.rotation import matrix_to_quat
+from parsim.core.sdbd.slide import slide
 
 __all__ = ["run_deposition"]
 
@@ -360,18 +363,10 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
         rest_checked = False
         # --------------------------------------------------------------------- move
         z_before = com[2]
-        started = counters.start(tallies)
-        if motion == MOTION_FALL:
-            n_c, n_dr, n_executed, floor_hit, n_t, phi = fall(n, particle, n_c, work, sediment, grid,
-                                                              settings, event_counts)
-            counters.stop(tallies, counters.FALL, started)
-            counters.add(tallies, counters.FALLS, 1)
-        else:
-            n_c, n_dr, n_executed, chunk_ends, floor_hit, n_t, phi, buf = roll(
-                n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_counts, buf)
-            n_chunk_ends += chunk_ends
-            counters.stop(tallies, counters.ROLL, started)
-            counters.add(tallies, counters.ROLLS, 1)
+        n_c, n_dr, n_executed, chunk_ends, floor_hit, n_t, phi, buf = _move(n, particle, (motion, k, m), n_c, work,
+                                                                            sediment, grid, settings, event_counts,
+                                                                            buf)
+        n_chunk_ends += chunk_ends
         started = counters.start(tallies)
         if n_executed > 1:
             event_counts[K_SIMULTANEOUS] += n_executed - 1
@@ -392,6 +387,33 @@ def _descend(n, particle, work, history, sediment, grid, settings, event_counts,
         counters.stop(tallies, counters.AFTER_MOVE, started)
         if stop:
             return RESTING_ON_FLOOR, n_c, n_steps, n_chunk_ends, worst_overlap, buf
+
+
+@jit(inline="always")
+def _move(n, particle, chosen, n_c, work, sediment, grid, settings, event_counts, buf):
+    """Step 2 of the module docs: the motion ``chosen = (motion, k, m)`` of the decision, up to its
+    earliest event, timed in the counters.  Returns ``(n_c, n_dr, n_executed, n_chunk_ends, floor_hit,
+    n_t, phi, buf)`` (:func:`.rolling.roll`'s; a fall or a slide has no chunk ends)."""
+    motion, k, m = chosen
+    tallies = work.counters
+    started = counters.start(tallies)
+    if motion == MOTION_FALL:
+        n_c, n_dr, n_executed, floor_hit, n_t, phi = fall(n, particle, n_c, work, sediment, grid, settings,
+                                                          event_counts)
+        counters.stop(tallies, counters.FALL, started)
+        counters.add(tallies, counters.FALLS, 1)
+        return n_c, n_dr, n_executed, 0, floor_hit, n_t, phi, buf
+    if motion == MOTION_SLIDE:
+        n_c, n_dr, n_executed, floor_hit, n_t, phi, buf = slide(n, particle, k, m, n_c, work, sediment, grid,
+                                                               settings, event_counts, buf)
+        counters.stop(tallies, counters.FALL, started)
+        counters.add(tallies, counters.FALLS, 1)
+        return n_c, n_dr, n_executed, 0, floor_hit, n_t, phi, buf
+    n_c, n_dr, n_executed, chunk_ends, floor_hit, n_t, phi, buf = roll(
+        n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_counts, buf)
+    counters.stop(tallies, counters.ROLL, started)
+    counters.add(tallies, counters.ROLLS, 1)
+    return n_c, n_dr, n_executed, chunk_ends, floor_hit, n_t, phi, buf
 
 
 @jit

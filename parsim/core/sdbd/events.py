@@ -521,15 +521,16 @@ def release_plane(com, px, py, ay, y_is_sphere, normal_y, out_normal):
 
 @jit(inline="always")
 def sliding_wall_release_plane(com, px, ay, normal_y, out_normal):
-    """Eqs. 25-30 for a frictionless wall ``y``: the plane whose crossing releases rolling on
-    pivot ``x`` from the wall.
+    """Eqs. 25-30 for a frictionless wall or face ``y``: the plane whose crossing releases rolling
+    on pivot ``x`` from it.
 
     The particle rotates about the axis through ``px`` along the wall's normal ``N``.  Rolling
     on ``x`` alone (axis ``e_z x d / |...|``, ``d = r_cm - px``) moves the wall's sphere
-    ``a_y`` at the rate ``N . ((e_z x d) x e) = (N . d) (z_ay - z_px)`` away from the wall
-    (``e = a_y - px``, ``N_z = 0``).  ``N . d`` is constant during the rotation (the axis is
-    along ``N``), so the release is the crossing of the height of the pivot by ``a_y``: the
-    plane ``z = z_px``, on the side of the sign of ``N . d``.
+    ``a_y`` at the rate ``N . ((e_z x d) x e) = (N . d) (z_ay - z_px) - N_z (d . e)`` away from
+    the wall (``e = a_y - px``).  ``N . d`` and ``d . e`` are constant during the rotation (the
+    axis is along ``N``, and ``r_cm`` and ``a_y`` turn together about it), so the release is the
+    crossing by ``a_y`` of the height ``z_px + N_z (d . e) / (N . d)``, on the side of the sign of
+    ``N . d``: the height of the pivot for a vertical wall (``N_z = 0``).
 
     Same return and plane convention as :func:`release_plane`; the point is ``a_y``
     (``use_com`` False).  ``N . d = 0`` (the centre of mass in the wall-parallel plane through
@@ -540,15 +541,20 @@ def sliding_wall_release_plane(com, px, ay, normal_y, out_normal):
     scale = math.sqrt((com[0] - px[0]) ** 2 + (com[1] - px[1]) ** 2 + (com[2] - px[2]) ** 2)
     if abs(nd) <= 1e-14 * scale or scale == 0.0:
         return False, False, 0.0, 0.0
+    height = px[2]
+    if normal_y[2] != 0.0:
+        de = ((com[0] - px[0]) * (ay[0] - px[0]) + (com[1] - px[1]) * (ay[1] - px[1])
+              + (com[2] - px[2]) * (ay[2] - px[2]))
+        height += normal_y[2] * de / nd
     out_normal[0] = 0.0
     out_normal[1] = 0.0
     if nd > 0.0:
-        # release when z_ay > z_px: stay blocked while -z_ay >= -z_px
+        # release when z_ay > height: stay blocked while -z_ay >= -height
         out_normal[2] = -1.0
-        c0 = -px[2]
+        c0 = -height
     else:
         out_normal[2] = 1.0
-        c0 = px[2]
+        c0 = height
     gap = out_normal[2] * ay[2] - c0
     return True, False, c0, gap
 

@@ -1,5 +1,5 @@
 """The fall (3.1): the particle translates straight down until one of its spheres touches the
-floor or a sediment sphere (eqs. 1-2); every contact made at the smallest drop is
+floor, a mesh vessel's face or a sediment sphere (eqs. 1-2); every contact made at the smallest drop is
 established (4.3)."""
 
 import math
@@ -11,8 +11,11 @@ from parsim.core.sdbd.bundles import grid_arrays, window_arrays
 from parsim.core.sdbd.constants import (
     EV_CONTACT,
     GEOM_CELL,
+    IGEOM_FACES,
     K_FALL_CONTACT,
     K_FLOOR_CONTACT,
+    K_WALL_CONTACT,
+    OB_FACE,
     OB_FLOOR,
     OB_SPHERE,
     SIMULTANEOUS_TOL,
@@ -22,6 +25,7 @@ from parsim.core.sdbd.contacts import add_contact, copy_contact
 from parsim.core.sdbd.counters import FALL_CANDIDATES
 from parsim.core.sdbd.counters import add as counters_add
 from parsim.core.sdbd.events import fall_drop
+from parsim.core.sdbd.faces import face_gap, face_within
 from parsim.core.sdbd.grid import column_range, column_within, min_image
 from parsim.core.sdbd.ties import push_event
 
@@ -62,9 +66,31 @@ def fall(n, particle, n_c, work, sediment, grid, settings, event_counts):
         if obstacle[r] == OB_FLOOR:
             floor_hit = True
             event_counts[K_FLOOR_CONTACT] += 1
+        elif obstacle[r] == OB_FACE:
+            event_counts[K_WALL_CONTACT] += 1
         else:
             event_counts[K_FALL_CONTACT] += 1
     return n_c, n_dr, n_made, floor_hit, n_t, drop
+
+
+@jit(inline="always")
+def _face_drops(n, particle, geom, face, events, window):
+    """Push the drops at which the spheres of the falling particle meet ``face`` (a mesh vessel's
+    face that faces up, ``N_z > 0``: the gap ``N . a - level`` closes at the rate ``N_z`` per unit of
+    drop) into the event window; returns ``(n_t, best)``."""
+    n_t, best, tolz = events
+    pos = particle.centre
+    rad = particle.radius
+    for i in range(n):
+        gap, rate = face_gap(geom, face, rad[i], pos[i, 0], pos[i, 1], pos[i, 2])
+        if rate <= 0.0:
+            break
+        # a sphere falls onto the face only where it lies above the face's box
+        if not face_within(geom, face, (pos[i, 0], pos[i, 1], -np.inf), (pos[i, 0], pos[i, 1], pos[i, 2]), rad[i]):
+            continue
+        d = max(gap / rate, 0.0)
+        n_t, best = push_event(n_t, best, tolz, (d, 1.0, 0.0), EV_CONTACT, (i, OB_FACE, face, 0.0, 0.0), window)
+    return n_t, best
 
 
 @jit(inline="always")
@@ -93,6 +119,8 @@ def fall_events(n, particle, sediment, grid, ell, window, counters):
     for i in range(n):
         d = pos[i, 2] - rad[i]
         n_t, best = push_event(n_t, best, tolz, (d, 1.0, 0.0), EV_CONTACT, (i, OB_FLOOR, -1, 0.0, 0.0), window)
+    for face in range(igeom[IGEOM_FACES]):
+        n_t, best = _face_drops(n, particle, geom, face, (n_t, best, tolz), window)
     for i in range(n):
         reach = rad[i] + r_max_sed
         xi = pos[i, 0]

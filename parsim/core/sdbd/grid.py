@@ -23,12 +23,12 @@ the cells of the surface of the pile, where all queries happen, share few memory
 
 State is kept in plain arrays so that numba kernels can own and grow it:
 
-``geom``     float64 ``[lo_x, lo_y, L_x, L_y, ax, ay, az]``, then the cylinder's polygon if any
-             (:mod:`.polygon`), read by name: ``geom[GEOM_CELL]`` is the cell (az), and so on
+``geom``     float64 ``[lo_x, lo_y, L_x, L_y, ax, ay, az]``, then the cylinder's polygon
+             (:mod:`.polygon`) or a mesh vessel's faces (:mod:`.faces`) if any, read by name: ``geom[GEOM_CELL]`` is the cell (az), and so on
              (:mod:`.constants`: ``GEOM_LOWER_X`` ... ``GEOM_CELL``, ``GEOM_CONTAINER``)
-``igeom``    int64 ``[mode, ncx, ncy, n_sides]`` (mode = lateral boundary code, n_sides the
-             polygon's sides, 0 for the box), read by name: ``IGEOM_MODE``, ``IGEOM_COLUMNS_X``,
-             ``IGEOM_COLUMNS_Y``, ``IGEOM_SIDES``
+``igeom``    int64 ``[mode, ncx, ncy, n_sides, n_faces]`` (mode = lateral boundary code, n_sides the
+             polygon's sides, 0 for the box, n_faces the faces), read by name: ``IGEOM_MODE``,
+             ``IGEOM_COLUMNS_X``, ``IGEOM_COLUMNS_Y``, ``IGEOM_SIDES``, ``IGEOM_FACES``
 ``head``     int64 ``(n_layer_capacity, n_col_capacity)``
 ``col_top``  int64 ``(n_col_capacity,)``
 ``nxt``      int64 ``(n_spheres_capacity,)``
@@ -56,6 +56,7 @@ from parsim.core.sdbd.constants import (
     LATERAL_PERIODIC,
     LATERAL_WALLS,
 )
+from parsim.core.sdbd.faces import FACE_WIDTH
 
 __all__ = [
     "grid_new",
@@ -114,7 +115,8 @@ def empty_grid(lateral, lo_x, lo_y, length_x, length_y, cell, n_spheres, polygon
         hcap = 2
     geom = np.concatenate((np.array([lo_x, lo_y, length_x, length_y, ax, ay, cell], dtype=np.float64),
                            polygon))
-    igeom = np.array([lateral, ncx, ncy, n_sides], dtype=np.int64)
+    n_faces = 0 if n_sides > 0 else polygon.shape[0] // FACE_WIDTH
+    igeom = np.array([lateral, ncx, ncy, n_sides, n_faces], dtype=np.int64)
     head = np.full((8, ncol), -1, dtype=np.int64)
     col_top = np.full(ncol, -1, dtype=np.int64)
     nxt = np.full(max(1, n_spheres), -1, dtype=np.int64)

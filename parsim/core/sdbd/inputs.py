@@ -9,6 +9,7 @@ import numpy as np
 from parsim.core.sdbd.constants import (
     CONTAINER_BOX,
     CONTAINER_CYLINDER,
+    CONTAINER_MESH,
     FLOOR_ROLL,
     FLOOR_STOP,
     LATERAL_NONE,
@@ -67,7 +68,8 @@ def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, 
                        particle_rotation, particle_drop_xy, box_lower_xy, box_upper_xy, lateral, floor,
                        trial_angle=1e-2, cycle_n=4, cycle_eps=1e-3, max_events_per_particle=100_000,
                        wall_contact=WALL_FRICTIONLESS, container=CONTAINER_BOX, cylinder=None,
-                       substrate_positions=None, substrate_radii=None, first_particle=0, keep_drawn_rotations=False):
+                       substrate_positions=None, substrate_radii=None, first_particle=0, keep_drawn_rotations=False,
+                       faces=None):
     """The arguments of :func:`deposit` validated (a ValueError names the first bad one) as a
     :class:`PreparedDeposition`; ``first_particle`` is the first particle's place in the drop order
     when these are a chunk of a longer run (the errors name particles by it).  With
@@ -112,7 +114,7 @@ def prepare_deposition(shape_offsets, shape_radii, shape_start, particle_shape, 
         r_max = 1.0
         ext_max = 1.0
 
-    sub_pos, sub_rad, polygon, n_sides, lo, hi = _container(lo, hi, lateral, r_max, ext_max, container, cylinder,
+    sub_pos, sub_rad, polygon, n_sides, lo, hi = _container(lo, hi, lateral, r_max, ext_max, (container, cylinder, faces),
                                                             substrate_positions, substrate_radii, 1e-9 * ell)
     r_sub = float(np.max(sub_rad)) if len(sub_rad) else 0.0
     if lateral == LATERAL_WALLS and P:
@@ -183,20 +185,21 @@ def _check_modes(lateral, floor, wall_contact, trial_angle, cycle_n, cycle_eps, 
 
 
 def check_container(box_lower_xy, box_upper_xy, lateral, largest_radius, largest_extent, length_scale,
-                    container=CONTAINER_BOX, cylinder=None, substrate_positions=None, substrate_radii=None):
+                    container=CONTAINER_BOX, cylinder=None, substrate_positions=None, substrate_radii=None, faces=None):
     """Raise the ValueError :func:`deposit` would raise for this container and substrate, for particles
     whose spheres have radii up to ``largest_radius`` and reach ``largest_extent`` from their centre
     of mass, and whose mean sphere radius at scale 1 is ``length_scale``: for checking a task before
     it runs."""
     lo = np.asarray(box_lower_xy, dtype=np.float64)
     hi = np.asarray(box_upper_xy, dtype=np.float64)
-    _container(lo, hi, lateral, float(largest_radius), float(largest_extent), container, cylinder,
+    _container(lo, hi, lateral, float(largest_radius), float(largest_extent), (container, cylinder, faces),
                substrate_positions, substrate_radii, 1e-9 * length_scale)
 
 
-def _container(lo, hi, lateral, r_max, ext_max, container, cylinder, substrate_positions, substrate_radii, tol):
-    """The substrate (centres, radii), the cylinder's polygon and sides (None, 0 for the box) and the
-    lateral box, validated: a box of positive size, a periodic side wider than twice the largest
+def _container(lo, hi, lateral, r_max, ext_max, walls, substrate_positions, substrate_radii, tol):
+    """The substrate (centres, radii), the container's geometry after the grid's (the cylinder's
+    polygon or the mesh vessel's faces; None for the box), the polygon's sides (0 but for the
+    cylinder) and the lateral box, validated for ``walls = (container, cylinder, faces)``: a box of positive size, a periodic side wider than twice the largest
     extent and four times the largest sphere radius (minimum images unambiguous), walls that hold
     the largest sphere, a substrate inside the walls."""
     if lateral != LATERAL_NONE:
@@ -206,7 +209,11 @@ def _container(lo, hi, lateral, r_max, ext_max, container, cylinder, substrate_p
             raise ValueError("box_upper_xy must exceed box_lower_xy in x and y")
     sub_pos, sub_rad = _substrate(substrate_positions, substrate_radii)
     r_contact = max(r_max, float(np.max(sub_rad)) if len(sub_rad) else 0.0)
-    polygon, n_sides, lo, hi = _cylinder(container, cylinder, lateral, lo, hi, r_contact)
+    container, cylinder, faces = walls
+    if container == CONTAINER_MESH or faces is not None:
+        polygon, n_sides = _mesh_faces(container, faces, lateral, cylinder), 0
+    else:
+        polygon, n_sides, lo, hi = _cylinder(container, cylinder, lateral, lo, hi, r_contact)
     if lateral == LATERAL_PERIODIC:
         side = np.min(hi - lo)
         need = max(2.0 * ext_max, 4.0 * r_contact)
@@ -240,6 +247,33 @@ def _substrate(substrate_positions, substrate_radii):
     return pos, rad
 
 
+def _mesh_faces(container, faces, lateral, cylinder):
+    """The faces of a mesh vessel as the grid's container geometry (:func:`.faces.face_geometry`),
+    validated."""
+    from parsim.core.sdbd.faces import face_geometry
+
+    if container != CONTAINER_MESH:
+        raise ValueError("faces are given but container is not CONTAINER_MESH")
+    if cylinder is not None:
+        raise ValueError("cylinder is given but container is CONTAINER_MESH")
+    if lateral != LATERAL_WALLS:
+        raise ValueError(f"a mesh vessel needs lateral = LATERAL_WALLS (1), got {lateral}")
+    if faces is None or len(faces) != 3:
+        raise ValueError("CONTAINER_MESH needs faces = (normals, levels, boxes)")
+    normals, levels, boxes = (np.asarray(a, dtype=np.float64) for a in faces)
+    n = len(levels)
+    if normals.shape != (n, 3) or levels.shape != (n,) or boxes.shape != (n, 6):
+        raise ValueError(f"faces must be normals (F, 3), levels (F,) and boxes (F, 6), got {normals.shape}, "
+                         f"{levels.shape} and {boxes.shape}")
+    if not (np.all(np.isfinite(normals)) and np.all(np.isfinite(levels)) and not np.any(np.isnan(boxes))):
+        raise ValueError("face normals and levels must be finite and boxes not NaN")
+    if np.any(np.abs(np.linalg.norm(normals, axis=1) - 1.0) > 1e-12) or np.any(normals[:, 2] < 0.0):
+        raise ValueError("face normals must be unit vectors with N_z >= 0 (the vessel has no overhang)")
+    if np.any(boxes[:, 1::2] < boxes[:, 0::2]):
+        raise ValueError("face boxes must be x0 <= x1, y0 <= y1, z0 <= z1")
+    return face_geometry(normals, levels, boxes)
+
+
 def _cylinder(container, cylinder, lateral, lo, hi, r_max):
     """The polygon of a cylindrical container (:func:`.polygon.polygon_geometry`), its number
     of sides and the box (the square about the cylinder), validated against the other
@@ -247,7 +281,8 @@ def _cylinder(container, cylinder, lateral, lo, hi, r_max):
     from parsim.core.sdbd.polygon import polygon_geometry
 
     if container not in (CONTAINER_BOX, CONTAINER_CYLINDER):
-        raise ValueError(f"container must be CONTAINER_BOX (0) or CONTAINER_CYLINDER (1), got {container}")
+        raise ValueError(f"container must be CONTAINER_BOX (0), CONTAINER_CYLINDER (1) or CONTAINER_MESH (2), "
+                         f"got {container}")
     if container == CONTAINER_BOX:
         if cylinder is not None:
             raise ValueError("cylinder is given but container is CONTAINER_BOX")
@@ -295,10 +330,12 @@ def _first_outside_walls(offsets, radii, start, pshape, pscale, prot, pxy, lo, h
             xy = pxy[chosen, None, :] + scale[:, None, None] * np.einsum("pij,kj->pki",
                                                                           rotation_matrices(prot[chosen])[:, :2], o)
             reach = scale[:, None] * r[None, :]
-            if polygon is not None:
+            if n_sides > 0:
                 out = _outside_polygon(xy.reshape(-1, 2), reach.ravel(), polygon, n_sides, tol).reshape(reach.shape)
             else:
                 out = (xy - reach[..., None] < lo - tol) | (xy + reach[..., None] > hi + tol)
+                if polygon is not None:
+                    out = np.any(out, axis=-1) | _outside_vertical_faces(xy, reach, polygon, tol)
             bad = chosen[np.any(out.reshape(len(chosen), -1), axis=1)]
             if len(bad):
                 first = min(first, int(bad[0]))
@@ -320,14 +357,37 @@ def _outside_polygon(xy, r, polygon, n_sides, tol):
     return outside
 
 
+def _outside_vertical_faces(xy, r, faces, tol):
+    """Which spheres (centres ``xy`` (..., 2), radii ``r`` (...)) cross a vertical face of a mesh
+    vessel (:mod:`.faces`) by more than ``tol``."""
+    from parsim.core.sdbd.faces import FACE_WIDTH
+
+    table = faces.reshape(-1, FACE_WIDTH)
+    vertical = table[table[:, 2] == 0.0]
+    gap = xy[..., None, 0] * vertical[:, 0] + xy[..., None, 1] * vertical[:, 1] - vertical[:, 3] - r[..., None]
+    return np.any(gap < -tol, axis=-1)
+
+
+def _outside_faces(pos, r, faces, tol):
+    """Which spheres (centres ``pos`` (k, 3), radii ``r``) cross a face of a mesh vessel by more than
+    ``tol``."""
+    from parsim.core.sdbd.faces import FACE_WIDTH
+
+    table = faces.reshape(-1, FACE_WIDTH)
+    return np.any(pos @ table[:, :3].T - table[:, 3] - r[:, None] < -tol, axis=1)
+
+
 def _check_substrate_inside(pos, rad, lo, hi, polygon, n_sides, tol):
-    """Every substrate sphere lies inside the walls (the box or the cylinder's polygon)."""
+    """Every substrate sphere lies inside the walls (the box or the cylinder's polygon, and a mesh
+    vessel's faces)."""
     if len(rad) == 0:
         return
-    if polygon is not None:
+    if n_sides > 0:
         outside = _outside_polygon(pos[:, :2], rad, polygon, n_sides, tol)
     else:
         outside = np.any((pos[:, :2] - rad[:, None] < lo - tol) | (pos[:, :2] + rad[:, None] > hi + tol), axis=1)
+        if polygon is not None:
+            outside |= _outside_faces(pos, rad, polygon, tol)
     if np.any(outside):
         j = int(np.argmax(outside))
         raise ValueError(f"substrate sphere {j}: centre {tuple(pos[j])}, radius {rad[j]}: it does not lie "

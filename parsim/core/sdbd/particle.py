@@ -7,7 +7,8 @@ centres follow as ``centre_i = com + R body_i``.
 import math
 
 from parsim.core.jit import jit
-from parsim.core.sdbd.constants import DROP_MARGIN, GEOM_CELL
+from parsim.core.sdbd.constants import DROP_MARGIN, GEOM_CELL, IGEOM_FACES
+from parsim.core.sdbd.faces import face_gap
 from parsim.core.sdbd.grid import top_near
 from parsim.core.sdbd.reads import note
 from parsim.core.sdbd.rotation import (
@@ -85,8 +86,32 @@ def drop_particle(p, particles, sediment, grid, ell, particle, reads, given_top)
                        com[0], com[1], reach)
     note(reads, com[0] - reach, com[0] + reach, com[1] - reach, com[1] + reach)
     com[2] = top + below + DROP_MARGIN * ell
+    if grid.igeom[IGEOM_FACES] > 0:
+        com[2] = max(com[2], _above_faces(n, particle, geom, grid.igeom[IGEOM_FACES]) + DROP_MARGIN * ell)
     place_spheres(n, particle)
     return n, top
+
+
+@jit(inline="always")
+def _above_faces(n, particle, geom, n_faces):
+    """The lowest height of the centre of mass at which no sphere of the particle lies below a
+    face of a mesh vessel that faces up (``N_z > 0``): sphere ``i`` at ``com + R b_i`` needs
+    ``N . (com + R b_i) >= c + r_i``.  In a convex vessel that is where the particle, above a
+    point of the vessel's floor, starts inside it."""
+    body = particle.body
+    rot = particle.rotation
+    com = particle.com
+    lowest = -math.inf
+    for face in range(n_faces):
+        for i in range(n):
+            ox = rot[0, 0] * body[i, 0] + rot[0, 1] * body[i, 1] + rot[0, 2] * body[i, 2]
+            oy = rot[1, 0] * body[i, 0] + rot[1, 1] * body[i, 1] + rot[1, 2] * body[i, 2]
+            oz = rot[2, 0] * body[i, 0] + rot[2, 1] * body[i, 1] + rot[2, 2] * body[i, 2]
+            gap, rate = face_gap(geom, face, particle.radius[i], com[0] + ox, com[1] + oy, oz)
+            if rate <= 0.0:
+                break
+            lowest = max(lowest, -gap / rate)
+    return lowest
 
 
 @jit(inline="always")

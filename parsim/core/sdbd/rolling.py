@@ -16,8 +16,9 @@ rotation, each an angle ``phi`` about the axis, are
   25-30 and the virtual small rotation of eq. 31);
 * the frustrated situation of 4.1 (:func:`.frustration.decision_changes`);
 * a new contact of any moving sphere (:func:`_new_contact_events`) with a sediment sphere
-  (circle intersections, eqs. 7-12), with the floor (eqs. 19-23) or with a wall or a side of
-  the cylinder's polygon (the same, vertical planes; :func:`_side_contact_events`).
+  (circle intersections, eqs. 7-12), with the floor (eqs. 19-23), with a wall or a side of
+  the cylinder's polygon (the same, vertical planes; :func:`_side_contact_events`) or with a
+  face of a mesh vessel (a plane of any normal; :func:`_face_contact_events`).
 
 The earliest event and those within ``SIMULTANEOUS_TOL`` of arc length of it are executed
 together (4.3): the particle turns by eq. 15 and the pivots and the contacts made are its new
@@ -56,6 +57,7 @@ from parsim.core.sdbd.constants import (
     GEOM_LOWER_X,
     GEOM_LOWER_Y,
     IGEOM_MODE,
+    IGEOM_FACES,
     IGEOM_SIDES,
     K_FLOOR_CONTACT,
     K_FRUSTRATED,
@@ -71,6 +73,7 @@ from parsim.core.sdbd.constants import (
     MOTION_SINGLE,
     NZ_TOL,
     OB_FLOOR,
+    OB_FACE,
     OB_SIDE,
     OB_SPHERE,
     OB_WALL_XLO,
@@ -93,6 +96,7 @@ from parsim.core.sdbd.events import (
 from parsim.core.sdbd.frustration import decision_changes
 from parsim.core.sdbd.grid import grid_collect
 from parsim.core.sdbd.particle import rotate_particle
+from parsim.core.sdbd.faces import face_plane, face_within
 from parsim.core.sdbd.polygon import candidate_sides, side_gap_in_box, side_plane
 from parsim.core.sdbd.reads import note
 from parsim.core.sdbd.rotation import rotate_point
@@ -121,7 +125,7 @@ def roll(n, particle, motion, k, m, n_c, work, sediment, grid, settings, event_c
         pivot[q] = scratch.decision[3 + q]
     n_pivots, n_dr = _pivots_and_released(motion, k, m, n_c, work)
     n_t, best, tol_phi = _end_of_arc(n, particle, axis, pivot, settings.ell, grid.geom, grid.igeom, window)
-    n_t, best = _loss_events(n_pivots, k, m, work, axis, pivot, settings.ell, n_t, best, tol_phi)
+    n_t, best = _loss_events(n_pivots, k, m, work, axis, pivot, settings, n_t, best, tol_phi)
     if n_pivots == 2:
         n_t, best = _release_events(particle.com, k, m, work, axis, pivot, settings, n_t, best, tol_phi)
     trial_angle = settings.trial_angle
@@ -211,9 +215,17 @@ def _periodic_arc(geom):
 
 
 @jit(inline="always")
-def _loss_events(n_pivots, k, m, work, axis, pivot, ell, n_t, best, tol_phi):
+def _loss_events(n_pivots, k, m, work, axis, pivot, settings, n_t, best, tol_phi):
     """Loss of a pivot contact: its moving sphere comes level with its sediment sphere
-    (eq. 17); on two pivots only if the other one is then level or below (3.3.4)."""
+    (eq. 17); on two pivots only if the other one is then level or below (3.3.4).
+
+    On a sphere pivot ``l`` and a frictionless inclined face ``o`` (the rotation about the axis
+    through ``P_l`` along the face's normal ``N_o``), the pivot is lost where sliding on the face
+    alone opens it: the slide ``s = N_z N_o - e_z`` moves ``a_l`` away from ``P_l`` once
+    ``N_l . s = N_z (N_l . N_o) - N_{l,z} >= 0``, and ``N_l . N_o`` is constant about that axis,
+    so the event is ``a_l`` crossing the height ``z(P_l) + D N_z (N_l . N_o)`` (the height of
+    ``P_l`` for a vertical face: eq. 17)."""
+    ell = settings.ell
     window = work.window
     ca, cP, cN, cD, _, ckind = geometry_arrays(work.geometry)
     scratch = work.scratch
@@ -225,18 +237,22 @@ def _loss_events(n_pivots, k, m, work, axis, pivot, ell, n_t, best, tol_phi):
         l = k if t == 0 else m
         if ckind[l] != OB_SPHERE:
             continue
+        o = m if t == 0 else k
+        on_face = n_pivots == 2 and settings.sliding_walls and ckind[o] == OB_FACE
+        level = cP[l, 2]
+        if on_face:
+            level += cD[l] * cN[o, 2] * (cN[l, 0] * cN[o, 0] + cN[l, 1] * cN[o, 1] + cN[l, 2] * cN[o, 2])
         nrm[0] = 0.0
         nrm[1] = 0.0
         nrm[2] = 1.0
-        A, B, K, rho, gap = plane_coefficients(ca[l], pivot, axis, nrm, cP[l, 2], e1, e2)
+        A, B, K, rho, gap = plane_coefficients(ca[l], pivot, axis, nrm, level, e1, e2)
         if rho == 0.0 or gap <= NZ_TOL * cD[l]:
             # level or below already: that crossing is not ahead
             continue
         phi, cc, ss = first_entry(A, B, K, gap, 1.0 / rho, ell, POLICY_TRUSTED)
         if phi > best + tol_phi:
             continue
-        if n_pivots == 2:
-            o = m if t == 0 else k
+        if n_pivots == 2 and not on_face:
             if ckind[o] == OB_SPHERE:
                 rotate_point(ca[o], pivot, axis, cc, ss, point)
                 nz = point[2] - cP[o, 2]
@@ -410,6 +426,10 @@ def _new_contact_events(n, particle, known, work, rotation, sediment, grid, sett
                 phi, cc, ss = first_entry(A, B, A + gap / rho, gap, 1.0 / rho, ell, pol)
                 if phi <= best + tol_phi:
                     n_t, best = push_event(n_t, best, tol_phi, (phi, cc, ss), EV_CONTACT, (i, ob, -1, 0.0, 0.0), window)
+        for face in range(igeom[IGEOM_FACES]):
+            n_t, best = _face_contact_events(i, pos, ri, rho, (o0 + xlo, o1 + ylo, o2 + zlo),
+                                             (o0 + xhi, o1 + yhi, o2 + zhi), known, work, geom, face, ell,
+                                             (n_t, best, tol_phi))
         # sediment spheres (the most frequent grid query: grid_collect here rather than
         # grid_collect_growing, measured 8% faster)
         reach = ri + reach_sed
@@ -502,6 +522,31 @@ def _side_contact_events(i, pos, ri, rho, arc, known, work, geom, n_sides, ell, 
         phi, cc, ss = first_entry(A, B, A + gap / rho, gap, 1.0 / rho, ell, pol)
         if phi <= best + tol_phi:
             n_t, best = push_event(n_t, best, tol_phi, (phi, cc, ss), EV_CONTACT, (i, OB_SIDE, side, 0.0, 0.0), window)
+    return n_t, best
+
+
+@jit(inline="always")
+def _face_contact_events(i, pos, ri, rho, lower, upper, known, work, geom, face, ell, events):
+    """New contact of moving sphere ``i`` (radius ``ri``, its centre on the circle of radius ``rho``
+    and frame ``work.scratch.e1, e2``, its arc within the box from ``lower`` to ``upper``) with a
+    mesh vessel's ``face`` (:mod:`.faces`), a plane as for a box wall but of any normal.  Returns
+    ``(n_t, best)``."""
+    n_t, best, tol_phi = events
+    n_pivots, n_dr = known
+    if not face_within(geom, face, lower, upper, ri + TOUCH_TOL * ell):
+        return n_t, best
+    pivots, released, window = work.pivots, work.released, work.window
+    if find_contact(n_pivots, pivots, i, OB_FACE, face) >= 0:
+        return n_t, best
+    e1, e2, nrm = work.scratch.e1, work.scratch.e2, work.scratch.normal
+    pol = POLICY_TRUSTED if find_contact(n_dr, released, i, OB_FACE, face) >= 0 else POLICY_NEW
+    c0 = face_plane(geom, face, ri, nrm)
+    A = -(nrm[0] * e1[0] + nrm[1] * e1[1] + nrm[2] * e1[2])
+    B = -(nrm[0] * e2[0] + nrm[1] * e2[1] + nrm[2] * e2[2])
+    gap = nrm[0] * pos[i, 0] + nrm[1] * pos[i, 1] + nrm[2] * pos[i, 2] - c0
+    phi, cc, ss = first_entry(A, B, A + gap / rho, gap, 1.0 / rho, ell, pol)
+    if phi <= best + tol_phi:
+        n_t, best = push_event(n_t, best, tol_phi, (phi, cc, ss), EV_CONTACT, (i, OB_FACE, face, 0.0, 0.0), window)
     return n_t, best
 
 

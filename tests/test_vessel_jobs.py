@@ -1,0 +1,106 @@
+"""Jobs in mesh vessels (``container = "mesh"``): an open box read from a mesh is the walled box bit for
+bit, the hopper job spread over ranks is its serial sediment, and bad vessel files are refused with one
+line naming the key."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from parsim.deposition.vessel import box_mesh, read_vessel
+
+REPOSITORY = Path(__file__).resolve().parent.parent
+SEARCH = REPOSITORY / "benchmarks" / "spread_equivalence.py"
+
+JOB = """name = "{name}"
+kind = "deposition"
+seed = 7
+realizations = 1
+output = "{output}"
+
+[parameters]
+n_particles = 150
+shape = "rod"
+shape_size = 3
+floor = "roll"
+{container}
+"""
+
+
+def _run(tmp_path, name, container):
+    job = tmp_path / f"{name}.toml"
+    job.write_text(JOB.format(name=name, output=(tmp_path / name).as_posix(), container=container))
+    done = subprocess.run([sys.executable, "-m", "parsim.cli", "run", str(job)], capture_output=True, text=True,
+                          timeout=600, cwd=tmp_path)
+    return done, tmp_path / name
+
+
+def _solved(tmp_path, name, container, stream):
+    """The job's one task solved in this process, as the runner solves it, from the random ``stream``."""
+    from mpi4py import MPI
+
+    from parsim.deposition.solver import SOLVER
+    from parsim.job import parse_job
+    from parsim.solvers import SOLVERS
+
+    job = parse_job(JOB.format(name=name, output=(tmp_path / name).as_posix(), container=container), SOLVERS,
+                    output=tmp_path / name)
+    (task,) = job.tasks()
+    return SOLVER.solve(job.point_parameters(task.point), np.random.default_rng(stream), MPI.COMM_SELF)
+
+
+def test_an_open_box_read_from_a_mesh_is_the_walled_box_bit_for_bit(tmp_path):
+    """The box's bottom is the floor and its sides the walls: no face is left, and from the same random
+    stream (the particles drawn alike, dropped at the same places) the sediment is the walled box's in
+    every bit."""
+    box_mesh(9.0, 9.0, 12.0).export(tmp_path / "box.stl")
+    assert len(read_vessel(tmp_path / "box.stl").levels) == 0
+    walled = _solved(tmp_path, "walled", 'lateral = "walls"\nbox_length = 9.0', 11).configuration.arrays
+    meshed = _solved(tmp_path, "meshed", f'container = "mesh"\ncontainer_file = "{tmp_path / "box.stl"}"',
+                     11).configuration.arrays
+    for key in ("spheres/position", "spheres/radius", "particles/rotation", "particles/state",
+                "particles/event_counts", "particles/center_of_mass"):
+        assert walled[key].tobytes() == meshed[key].tobytes(), key
+
+
+def test_a_closed_vessel_is_refused_naming_its_key(tmp_path):
+    """A watertight mesh has no opening to drop into: one line naming container_file, no task run."""
+    import trimesh
+
+    trimesh.creation.box(extents=(9.0, 9.0, 9.0)).export(tmp_path / "closed.stl")
+    done, output = _run(tmp_path, "closed", f'container = "mesh"\ncontainer_file = "{tmp_path / "closed.stl"}"')
+    assert done.returncode != 0
+    assert "container_file" in done.stderr and "opening" in done.stderr, done.stderr
+    assert not (output / "tasks").exists() or not list((output / "tasks").glob("*.h5"))
+
+
+def test_the_hopper_job_spread_over_two_ranks_is_its_serial_sediment(tmp_path):
+    """jobs/hopper.toml settled as one sediment spread over two blocks (with random delays before every
+    message) and serially: every field of the sediment equal, bit for bit."""
+    report_path = tmp_path / "report.json"
+    done = subprocess.run([sys.executable, str(SEARCH), "--one", str(REPOSITORY / "jobs" / "hopper.toml"),
+                           "--ranks", "2", "--jitter", "2e-5", "--timeout", "300", "--work", str(tmp_path / "work"),
+                           "--report", str(report_path)], capture_output=True, text=True, timeout=1200,
+                          cwd=REPOSITORY)
+    assert report_path.exists(), done.stdout + done.stderr
+    report = json.loads(report_path.read_text())
+    assert not report["serial_errors"], report["serial_errors"]
+    tally = report["ranks"]["2"]
+    assert tally == {**tally, "run": 1, "split": 1, "divergent": 0, "failed": 0}, done.stdout
+
+
+def test_the_hopper_job_keeps_every_sphere_inside_its_vessel(tmp_path):
+    """Every sphere of the hopper's sediment lies behind every face of the funnel and the collar."""
+    done = subprocess.run([sys.executable, "-m", "parsim.cli", "run", str(REPOSITORY / "jobs" / "hopper.toml"),
+                           "--output", str(tmp_path / "hopper")], capture_output=True, text=True, timeout=600,
+                          cwd=REPOSITORY)
+    assert done.returncode == 0, done.stderr
+    vessel = read_vessel(REPOSITORY / "jobs" / "data" / "hopper.obj")
+    for task in sorted((tmp_path / "hopper" / "tasks").glob("*.h5")):
+        with h5py.File(task) as f:
+            position, radius = f["spheres/position"][()], f["spheres/radius"][()]
+            assert np.all(vessel.inside(position, radius - 1e-9)), task
+            assert f.attrs["vessel_volume"] == vessel.volume
