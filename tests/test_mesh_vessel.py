@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from parsim.core import sdbd
-from parsim.deposition.vessel import hopper_mesh, v_trough_mesh, vessel_from_mesh
+from parsim.deposition.vessel import hopper_mesh, prism_mesh, v_trough_mesh, vessel_from_mesh
 
 R = 0.5
 
@@ -144,3 +144,32 @@ def test_a_trough_read_from_its_mesh_is_the_trough_of_its_planes():
     res = _sphere_drop((3.0, 2.0), vessel.faces(), tuple(vessel.upper[:2]))
     half = math.atan2(5.0, 5.0)  # the slopes rise 5 over 5
     np.testing.assert_allclose(res.positions[0], [5.0, 2.0, R / math.sin(half)], atol=1e-9)
+
+
+@pytest.mark.parametrize("floor", [sdbd.FLOOR_STOP, sdbd.FLOOR_ROLL])
+@pytest.mark.parametrize("dimers", [False, True])
+def test_a_200_sided_prism_gives_the_cylinders_sediment(floor, dimers):
+    """The prism read from a mesh and the cylinder modelled as the same polygon are one container, in two
+    codes: 4 sides become the box's walls and 196 faces, against 200 sides of the polygon.  120 spheres
+    (or dimers, randomly turned) dropped at the same random places end where the cylinder puts them, to
+    round-off (the prism's box is the polygon's, the cylinder's the square about its circle)."""
+    radius, sides, n = 4.0, 200, 120
+    vessel = vessel_from_mesh(prism_mesh(radius, 6.0, sides))
+    apothem = radius * math.cos(math.pi / sides)
+    assert len(vessel.levels) == sides - 4
+    np.testing.assert_allclose(vessel.upper[:2], 2.0 * apothem, rtol=1e-12)
+    rng = np.random.default_rng(3)
+    offsets = np.array([[-0.4, 0.0, 0.0], [0.4, 0.0, 0.0]]) if dimers else np.zeros((1, 3))
+    extent = float(np.max(np.linalg.norm(offsets, axis=1))) + R
+    angle = rng.uniform(0.0, 2.0 * np.pi, n)
+    distance = (apothem - extent) * np.sqrt(rng.uniform(0.0, 1.0, n)) * 0.999
+    xy = np.column_stack([apothem + distance * np.cos(angle), apothem + distance * np.sin(angle)])
+    particles = (offsets, np.full(len(offsets), R), np.array([0, len(offsets)]), np.zeros(n, dtype=np.int64),
+                 np.ones(n), rng.normal(size=(n, 4)))
+    prism = sdbd.deposit(*particles, xy, (0.0, 0.0), tuple(vessel.upper[:2]), sdbd.LATERAL_WALLS, floor,
+                         container=sdbd.CONTAINER_MESH, faces=vessel.faces())
+    shift = radius - apothem
+    cylinder = sdbd.deposit(*particles, xy + shift, (0.0, 0.0), (2 * radius, 2 * radius), sdbd.LATERAL_WALLS, floor,
+                            container=sdbd.CONTAINER_CYLINDER, cylinder=(radius, radius, radius, sides))
+    np.testing.assert_allclose(prism.positions, cylinder.positions - [shift, shift, 0.0], rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(prism.state, cylinder.state)

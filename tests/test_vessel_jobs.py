@@ -93,7 +93,12 @@ def test_the_hopper_job_spread_over_two_ranks_is_its_serial_sediment(tmp_path):
 
 
 def test_the_hopper_job_keeps_every_sphere_inside_its_vessel(tmp_path):
-    """Every sphere of the hopper's sediment lies behind every face of the funnel and the collar."""
+    """Every sphere of the hopper's sediment lies behind every face of the funnel and the collar, and its
+    voxel image counts the space behind the faces as solid: no void voxel outside the vessel, and every
+    voxel inside the vessel that no sphere covers is void."""
+    from parsim.output.export import read_task
+    from parsim.output.voxels import voxelize
+
     done = subprocess.run([sys.executable, "-m", "parsim.cli", "run", str(REPOSITORY / "jobs" / "hopper.toml"),
                            "--output", str(tmp_path / "hopper")], capture_output=True, text=True, timeout=600,
                           cwd=REPOSITORY)
@@ -104,3 +109,12 @@ def test_the_hopper_job_keeps_every_sphere_inside_its_vessel(tmp_path):
             position, radius = f["spheres/position"][()], f["spheres/radius"][()]
             assert np.all(vessel.inside(position, radius - 1e-9)), task
             assert f.attrs["vessel_volume"] == vessel.volume
+        image = voxelize(read_task(task), 0.5)
+        axes = [image.origin[k] + (np.arange(image.void.shape[k]) + 0.5) * image.spacing[k] for k in range(3)]
+        centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        inside = vessel.inside(centres, np.zeros(len(centres))).reshape(image.void.shape)
+        assert not np.any(image.void & ~inside)
+        covered = np.zeros(len(centres), dtype=bool)
+        for centre, r in zip(position, radius):
+            covered |= np.sum((centres - centre) ** 2, axis=1) <= r * r
+        assert np.array_equal(image.void, inside & ~covered.reshape(image.void.shape))
