@@ -430,7 +430,7 @@ def measuring_region(params, geometry, lowest_xy, highest_xy, largest_radius, di
         polygon = 0.5 * sides * radius**2 * math.sin(2.0 * math.pi / sides)
         return Region(geometry.lower, geometry.upper, False, True, polygon / (2.0 * radius) ** 2, wall_distance,
                       (x, y, radius * math.cos(math.pi / sides)))
-    if geometry.vessel is not None:  # its section changes with height: no packing profile of a constant area
+    if params["container"] == "mesh":  # its section changes with height: no packing profile of a constant area
         return Region(geometry.lower, geometry.upper, False, False)
     if params["lateral"] == "walls":
         return Region(geometry.lower, geometry.upper, False, True, wall_distance=wall_distance)
