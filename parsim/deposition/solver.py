@@ -276,15 +276,16 @@ def check(params: dict) -> None:
     sizes = _Sizes.of(species)
     if params["container"] == "cylinder":
         _check_cylinder(params, species, sizes)
-    elif params["container"] == "mesh":
-        _check_vessel(params, read_vessel(params["container_file"]), sizes)
-    elif params["lateral"] != "none":
+    elif params["container"] == "box" and params["lateral"] != "none":
         _check_box(params, sizes)
-    else:
+    elif params["container"] == "box":
         _check_heap(params, sizes)
+    geometry = _container(params, species)  # reads a vessel's mesh once for the checks below
+    if geometry.vessel is not None:
+        _check_vessel(params, geometry.vessel, sizes)
     substrate = substrate_spheres(params)
-    _check_container(params, _container(params, species), sizes, substrate)
-    _check_grid_memory(params, species, substrate)
+    _check_container(params, geometry, sizes, substrate)
+    _check_grid_memory(params, species, substrate, geometry)
 
 
 @dataclass(frozen=True)
@@ -362,7 +363,7 @@ def _check_container(params: dict, geometry: "_Geometry", sizes: _Sizes, substra
         raise JobError(f"{_container_size_key(params)} = {params[_container_size_key(params)]!r}: {error}") from None
 
 
-def _check_grid_memory(params: dict, species: tuple[Species, ...], substrate) -> None:
+def _check_grid_memory(params: dict, species: tuple[Species, ...], substrate, geometry: "_Geometry") -> None:
     """Refuse a container whose sediment grid, with the rest of the task, needs more than this machine's memory.
 
     The grid has a column per cell of the box, the cell being the first particle's largest sphere
@@ -371,10 +372,7 @@ def _check_grid_memory(params: dict, species: tuple[Species, ...], substrate) ->
     if params["container"] == "box" and params["lateral"] == "none":
         return
     size = _container_size_key(params)
-    if size == "container_file":
-        width = float(np.max(read_vessel(params[size]).upper[:2]))
-    else:
-        width = 2.0 * params[size] if size == "container_radius" else params[size]
+    width = float(np.max(geometry.upper - geometry.lower))
     cell = 2.0 * max(min(float(s.radii.max()) * s.smallest_scale() for s in species),
                      float(substrate[1].max(initial=0.0)))
     columns = math.floor(width / cell) ** 2
