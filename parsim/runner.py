@@ -54,8 +54,11 @@ from parsim.solver import TaskResult
 TIME_RESERVE_SECONDS = 30.0
 #: ... and this long per task of the job, for its row in the dataset (10⁵ rows: 1.6 s measured, 10 s kept).
 TIME_RESERVE_PER_TASK = 1e-4
-#: How long a rank other than 0 waits, after a signal, for rank 0 to end the job before it aborts it itself.
+#: How long a rank other than 0 waits, after a signal, for rank 0's word that it has the signal too,
+#: before it ends the job itself with its own line.
 SIGNAL_GRACE_SECONDS = 2.0
+#: How long a rank other than 0 then waits, silent, for rank 0 to end the job.
+ROOT_ENDING_SECONDS = 20.0
 #: How long rank 0 waits, after a signal, for the files and rows other ranks are writing, before it counts them.
 WRITE_SETTLE_SECONDS = 0.2
 
@@ -76,9 +79,10 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
     lock = FolderLock(folder.root)
     writing = threading.Lock()  # held while a task's file and row are written; a signal takes it to stop them
     rank = comm.Get_rank()
+    signals = comm.Dup()  # carries rank 0's word that it has a signal, apart from every other message
 
     try:
-        with ending_on_signals(lambda number: _end_on_signal(number, job, folder, lock, writing, comm)):
+        with ending_on_signals(lambda number: _end_on_signal(number, job, folder, lock, writing, signals)):
             with phase("claim_folder"):
                 pending = on_root(comm, lambda: _claim(job, folder, lock))
             if not pending and on_root(comm, lambda: _dataset_is_current(job, folder)):
@@ -99,6 +103,7 @@ def run_job(job: Job, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True, ra
                       file=sys.stderr, flush=True)
             return outputs
     finally:
+        signals.Free()
         if rank == 0:
             lock.release()
 
@@ -314,27 +319,47 @@ def _write_outputs(job: Job, folder: OutputFolder, mpi_size: int, ranks_per_task
 
 
 def _end_on_signal(number: signal.Signals, job: Job, folder: OutputFolder, lock: FolderLock,
-                   writing: threading.Lock, comm: MPI.Comm) -> None:
+                   writing: threading.Lock, signals: MPI.Comm) -> None:
     """A signal's last words: no more task files or rows; rank 0 releases the lock and says what is kept.
 
     Every rank stops writing task files and rows at once (a write under way completes).
-    Rank 0 waits a moment for the other ranks' writes under way, counts the
-    finished tasks' rows, prints the line and exits; the launcher then ends the other
-    ranks, which abort the job themselves if rank 0 did not get the signal.
+    Rank 0 tells the other ranks that it has the signal, waits a moment for their writes
+    under way, counts the finished tasks' rows, prints the line and exits; the launcher then
+    ends the other ranks.  A rank other than 0 that has not heard from rank 0 within
+    ``SIGNAL_GRACE_SECONDS`` (a signal sent to it alone) ends the job itself with a line of
+    its own; one that has heard stays silent, so that however long rank 0 takes to count,
+    the run ends with one line.
     """
     writing.acquire()
-    if comm.Get_rank() != 0:
-        time.sleep(SIGNAL_GRACE_SECONDS)
-        print(f"\nparsim: rank {comm.Get_rank()} got {number.name}; run the same command to finish",
+    rank = signals.Get_rank()
+    if rank == 0:
+        for other in range(1, signals.Get_size()):
+            signals.isend(int(number), dest=other)  # eager and never waited for: the process exits soon
+        time.sleep(WRITE_SETTLE_SECONDS)
+        lock.release()
+        kept = int(folder.finished(job)[1].sum())
+        what = "interrupted" if number == signal.SIGINT else f"stopped by {number.name}"
+        print(f"\nparsim: {what}; {kept} of {len(job.tasks())} tasks kept, run the same command to finish",
               file=sys.stderr, flush=True)
-        comm.Abort(128 + number)
         return
-    time.sleep(WRITE_SETTLE_SECONDS)
-    lock.release()
-    kept = int(folder.finished(job)[1].sum())
-    what = "interrupted" if number == signal.SIGINT else f"stopped by {number.name}"
-    print(f"\nparsim: {what}; {kept} of {len(job.tasks())} tasks kept, run the same command to finish",
-          file=sys.stderr, flush=True)
+    if _heard_from_root(signals, SIGNAL_GRACE_SECONDS):
+        time.sleep(ROOT_ENDING_SECONDS)
+        print(f"\nparsim: rank 0 did not end the job within {ROOT_ENDING_SECONDS:.0f} s of {number.name}; "
+              "run the same command to finish", file=sys.stderr, flush=True)
+    else:
+        print(f"\nparsim: rank {rank} got {number.name}; run the same command to finish",
+              file=sys.stderr, flush=True)
+    signals.Abort(128 + number)
+
+
+def _heard_from_root(signals: MPI.Comm, seconds: float) -> bool:
+    """Whether rank 0's word that it has a signal arrives on ``signals`` within ``seconds``."""
+    deadline = time.monotonic() + seconds
+    while not signals.Iprobe(source=0):
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
 
 
 def _check_ranks(comm: MPI.Comm, ranks_per_task: int) -> None:

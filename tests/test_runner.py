@@ -169,6 +169,72 @@ def test_ctrl_c_ends_every_rank_with_one_line_and_resumes(quickstart_two_ranks, 
                                 reproducible_part(quickstart_two_ranks / "quickstart.nc"))
 
 
+def _rank_pids(launcher: int) -> dict[int, int]:
+    """The PIDs of the ranks that the launcher ``launcher`` started, by rank (each one's PMI_RANK)."""
+    parents = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            parents[int(stat.parent.name)] = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError):
+            continue
+    descendants, added = {launcher}, True
+    while added:
+        grown = descendants | {pid for pid, parent in parents.items() if parent in descendants}
+        added, descendants = grown != descendants, grown
+    ranks = {}
+    for pid in descendants:
+        try:
+            environment = Path(f"/proc/{pid}/environ").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        for entry in environment:
+            if entry.startswith(b"PMI_RANK="):
+                ranks[int(entry.split(b"=", 1)[1])] = pid
+    return ranks
+
+
+@pytest.mark.mpi
+def test_a_slow_rank_0_still_gives_one_line(quickstart_two_ranks, tmp_path):
+    """Rank 0 takes longer to count the kept tasks than the other ranks wait for it: they hear that it has
+    the signal, and the run still ends with its line alone."""
+    slow = (f"import parsim.runner, parsim.cli; parsim.runner.WRITE_SETTLE_SECONDS = "
+            f"2 * parsim.runner.SIGNAL_GRACE_SECONDS; parsim.cli.main(['run', '{QUICKSTART}', '--output', "
+            f"'{tmp_path}', '--quiet'])")
+    process = subprocess.Popen([mpiexec(), "-n", "2", sys.executable, "-c", slow], start_new_session=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    wait_for_task_files(tmp_path / "tasks", 3, process)
+    os.killpg(process.pid, signal.SIGTERM)
+    try:
+        _, stderr = process.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        kill_session(process)
+        raise AssertionError("the ranks did not end within 30 s of SIGTERM") from None
+    lines = [line for line in error_lines(stderr) if not line.startswith("[mpiexec@")]
+    assert len(lines) == 1 and lines[0].startswith("parsim: stopped by SIGTERM; "), stderr
+    assert not (tmp_path / "parsim.lock").exists()
+
+
+@pytest.mark.mpi
+def test_a_signal_to_one_other_rank_alone_ends_the_job_with_its_line(quickstart_two_ranks, tmp_path):
+    """A SIGTERM that reaches rank 1 but not rank 0: rank 1 says so and ends the job within seconds."""
+    command = [mpiexec(), "-n", "2", sys.executable, *parsim_command("run", QUICKSTART, "--output", str(tmp_path),
+                                                                      "--quiet")]
+    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    wait_for_task_files(tmp_path / "tasks", 3, process)
+    os.kill(_rank_pids(process.pid)[1], signal.SIGTERM)
+    signalled = time.monotonic()
+    try:
+        _, stderr = process.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        kill_session(process)
+        raise AssertionError("the ranks did not end within 30 s of SIGTERM to rank 1") from None
+    assert time.monotonic() - signalled < 10
+    lines = [line for line in error_lines(stderr) if not line.startswith("[mpiexec@")]
+    assert process.returncode != 0
+    assert lines == ["parsim: rank 1 got SIGTERM; run the same command to finish"], stderr
+
+
 @pytest.mark.parametrize("number", [signal.SIGTERM, signal.SIGHUP])
 def test_sigterm_or_sighup_of_the_process_group_keeps_the_finished_tasks(tmp_path, number):
     """A batch system's SIGTERM, a closed terminal's SIGHUP: the line, the shell's status, the lock gone; the
