@@ -9,8 +9,9 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 
-from parsim.deposition.vessel import box_mesh, read_vessel
+from parsim.deposition.vessel import box_mesh, hopper_mesh, read_vessel
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 SEARCH = REPOSITORY / "benchmarks" / "spread_equivalence.py"
@@ -22,8 +23,8 @@ realizations = 1
 output = "{output}"
 
 [parameters]
-n_particles = 150
-shape = "rod"
+n_particles = {n_particles}
+shape = "{shape}"
 shape_size = 3
 floor = "roll"
 {container}
@@ -32,13 +33,14 @@ floor = "roll"
 
 def _run(tmp_path, name, container):
     job = tmp_path / f"{name}.toml"
-    job.write_text(JOB.format(name=name, output=(tmp_path / name).as_posix(), container=container))
+    job.write_text(JOB.format(name=name, output=(tmp_path / name).as_posix(), container=container, shape="rod",
+                              n_particles=150))
     done = subprocess.run([sys.executable, "-m", "parsim.cli", "run", str(job)], capture_output=True, text=True,
                           timeout=600, cwd=tmp_path)
     return done, tmp_path / name
 
 
-def _solved(tmp_path, name, container, stream):
+def _solved(tmp_path, name, container, stream, shape="rod", n_particles=150):
     """The job's one task solved in this process, as the runner solves it, from the random ``stream``."""
     from mpi4py import MPI
 
@@ -46,8 +48,8 @@ def _solved(tmp_path, name, container, stream):
     from parsim.job import parse_job
     from parsim.solvers import SOLVERS
 
-    job = parse_job(JOB.format(name=name, output=(tmp_path / name).as_posix(), container=container), SOLVERS,
-                    output=tmp_path / name)
+    job = parse_job(JOB.format(name=name, output=(tmp_path / name).as_posix(), container=container, shape=shape,
+                              n_particles=n_particles), SOLVERS, output=tmp_path / name)
     (task,) = job.tasks()
     return SOLVER.solve(job.point_parameters(task.point), np.random.default_rng(stream), MPI.COMM_SELF)
 
@@ -55,15 +57,23 @@ def _solved(tmp_path, name, container, stream):
 def test_an_open_box_read_from_a_mesh_is_the_walled_box_bit_for_bit(tmp_path):
     """The box's bottom is the floor and its sides the walls: no face is left, and from the same random
     stream (the particles drawn alike, dropped at the same places) the sediment is the walled box's in
-    every bit."""
+    every bit, and so are its statistics but for the rounding of the volumes."""
     box_mesh(9.0, 9.0, 12.0).export(tmp_path / "box.stl")
     assert len(read_vessel(tmp_path / "box.stl").levels) == 0
-    walled = _solved(tmp_path, "walled", 'lateral = "walls"\nbox_length = 9.0', 11).configuration.arrays
-    meshed = _solved(tmp_path, "meshed", f'container = "mesh"\ncontainer_file = "{tmp_path / "box.stl"}"',
-                     11).configuration.arrays
+    walled = _solved(tmp_path, "walled", 'lateral = "walls"\nbox_length = 9.0', 11)
+    meshed = _solved(tmp_path, "meshed", f'container = "mesh"\ncontainer_file = "{tmp_path / "box.stl"}"', 11)
     for key in ("spheres/position", "spheres/radius", "particles/rotation", "particles/state",
                 "particles/event_counts", "particles/center_of_mass"):
-        assert walled[key].tobytes() == meshed[key].tobytes(), key
+        assert walled.configuration.arrays[key].tobytes() == meshed.configuration.arrays[key].tobytes(), key
+    # the statistics: the box's volumes as the vessel's (Simpson's rule of a constant section), to rounding
+    from parsim.deposition.solver import SOLVER
+
+    assert walled.statistics.keys() == meshed.statistics.keys()
+    timings = {statistic.name for statistic in SOLVER.statistics if statistic.measured}
+    for key, value in walled.statistics.items():
+        if key in timings:
+            continue
+        np.testing.assert_allclose(meshed.statistics[key], value, rtol=1e-12, atol=0, equal_nan=True, err_msg=key)
 
 
 def test_a_closed_vessel_is_refused_naming_its_key(tmp_path):
@@ -118,3 +128,45 @@ def test_the_hopper_job_keeps_every_sphere_inside_its_vessel(tmp_path):
         for centre, r in zip(position, radius):
             covered |= np.sum((centres - centre) ** 2, axis=1) <= r * r
         assert np.array_equal(image.void, inside & ~covered.reshape(image.void.shape))
+
+
+def _slab_volumes(position, radius, low, high):
+    """The spheres' volume between heights ``low`` and ``high``: pi (r^2 t - t^3 / 3) between the clipped
+    heights t = z - z_c of each sphere, summed (spheres that do not overlap)."""
+    a = np.clip(low - position[:, 2], -radius, radius)
+    b = np.clip(high - position[:, 2], -radius, radius)
+    return float(np.sum(np.pi * (radius**2 * (b - a) - (b**3 - a**3) / 3.0)))
+
+
+def test_packing_in_a_hopper_is_the_spheres_volume_over_the_vessels(tmp_path):
+    """600 spheres in an octagonal hopper: each slab's phi(z) is the spheres' volume in it over the vessel's
+    (the divergence theorem over the polytope's facets), and the bulk's phi is the volume in the bulk slab of
+    the spheres whose centres lie 4 diameters inside every face and wall, over that region's volume in the
+    slab.  (Frictionless faces leave a crater: the spheres that slide down them pile up against them.)"""
+    from parsim.deposition.statistics import BULK_SLAB, BULK_WALL_DIAMETERS, PROFILE_TOP
+    from tests.mesh_files import write
+    from tests.polytopes import facet_volume
+
+    path = write(hopper_mesh(10.0, 6.0, 6.0, 8), tmp_path, "hopper.obj")
+    vessel = read_vessel(path)
+    result = _solved(tmp_path, "spheres", f'container = "mesh"\ncontainer_file = "{path}"', 5,
+                     shape="sphere", n_particles=600)
+    arrays, statistics = result.configuration.arrays, result.statistics
+    position, radius = arrays["spheres/position"], arrays["spheres/radius"]
+    inside = vessel.convex_inside()
+    h = statistics["filling_height"]
+    edges = np.linspace(0.0, PROFILE_TOP * h, len(statistics["packing_profile"]) + 1)
+    expected = [_slab_volumes(position, radius, low, high) / facet_volume(inside, low, high)
+                for low, high in zip(edges[:-1], edges[1:])]
+    np.testing.assert_allclose(statistics["packing_profile"], expected, rtol=1e-9)
+
+    distance = BULK_WALL_DIAMETERS * 2.0 * float(radius[0])
+    low, high = BULK_SLAB[0] * h, BULK_SLAB[1] * h
+    behind_faces = np.all(position @ vessel.normals.T >= vessel.levels + distance, axis=1)
+    within_walls = np.all((position[:, :2] >= distance) & (position[:, :2] <= vessel.upper[:2] - distance), axis=1)
+    in_region = behind_faces & within_walls
+    assert statistics["n_bulk_particles"] == np.sum(in_region & (position[:, 2] >= low) & (position[:, 2] < high)) > 10
+    # the spheres of every particle over the bulk's region, clipped to the slab (as over a walled box's area)
+    phi = (_slab_volumes(position[in_region], radius[in_region], low, high)
+           / facet_volume(inside.shrunk(distance), low, high))
+    assert statistics["bulk_packing_fraction"] == pytest.approx(phi, rel=1e-9)

@@ -42,6 +42,7 @@ from parsim.core.sediment import (
 )
 from parsim.parameters import Parameter
 from parsim.solver import LENGTH_UNITS, Coordinate, Statistic, coded_coordinate
+from parsim.deposition.inside import ConvexInside
 from parsim.deposition.materials import mesh_approximation, mesh_volume
 
 BULK_SLAB = (0.25, 0.75)  # the bulk: this slab of the deposit, z_b + BULK_SLAB (h - z_b), away from floor and surface
@@ -154,7 +155,10 @@ class Region:
     The bulk's horizontal area: the whole periodic box (or a heap's box); with walls the box
     shrunk by ``wall_distance``; in a cylinder the disc of radius r_in - ``wall_distance`` about
     its axis, ``disc`` = (x, y, r_in) with r_in the inscribed radius of the wall's polygon, so that
-    every point of the area is at least ``wall_distance`` from every side.
+    every point of the area is at least ``wall_distance`` from every side.  In a mesh vessel, whose
+    section changes with height, the volumes are the vessel's own: ``inside`` is its inside and
+    ``bulk_inside`` the points at least ``wall_distance`` from every face and wall
+    (:class:`parsim.deposition.inside.ConvexInside`), both exact.
     """
 
     lower: np.ndarray
@@ -164,6 +168,15 @@ class Region:
     inside_fraction: float = 1.0
     wall_distance: float = 0.0
     disc: tuple | None = None
+    inside: ConvexInside | None = None
+    bulk_inside: ConvexInside | None = None
+
+    def has_bulk(self) -> bool:
+        """Whether the walls leave room for a bulk (a vessel's inside widens upwards: room at some height is
+        room above the highest height where its section changes)."""
+        if self.bulk_inside is not None:
+            return self.bulk_inside.area_at(float(self.bulk_inside.breaks().max(initial=0.0)) + 1.0) > 0.0
+        return self.bulk_area() > 0.0
 
     def bulk_area(self) -> float:
         """Area of the bulk's horizontal section (0 when the walls leave no room for it)."""
@@ -171,11 +184,27 @@ class Region:
             return math.pi * max(self.disc[2] - self.wall_distance, 0.0) ** 2
         return float(np.prod(np.maximum(self.upper - self.lower - 2.0 * self.wall_distance, 0.0)))
 
-    def in_bulk_area(self, xy: np.ndarray, margin: float = 0.0) -> np.ndarray:
-        """Which points ``xy`` (n, 2) lie in the bulk's area at least ``margin`` from its edges (a periodic
-        box has none)."""
+    def bulk_volume(self, low: float, high: float) -> float:
+        """Volume of the bulk's region between heights ``low`` and ``high``."""
+        if self.bulk_inside is not None:
+            return self.bulk_inside.volume_between(low, high)
+        return self.bulk_area() * (high - low)
+
+    def layer_volumes(self, slabs: np.ndarray) -> np.ndarray:
+        """Volume of the container in each slab (n, 2) of heights: the box's share ``inside_fraction``, or
+        the vessel's inside."""
+        if self.inside is not None:
+            return np.array([self.inside.volume_between(low, high) for low, high in slabs])
+        return float(np.prod(self.upper - self.lower)) * (slabs[:, 1] - slabs[:, 0]) * self.inside_fraction
+
+    def in_bulk_area(self, points: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """Which points (n, 3) lie over the bulk's area (in a vessel: in its bulk's region) at least
+        ``margin`` from its edges (a periodic box has none)."""
         if self.periodic:
-            return np.ones(len(xy), dtype=bool)
+            return np.ones(len(points), dtype=bool)
+        if self.bulk_inside is not None:
+            return self.bulk_inside.contains(points, margin)
+        xy = points[:, :2]
         reach = self.wall_distance + margin
         if self.disc is not None:
             x, y, radius = self.disc
@@ -336,7 +365,7 @@ class Whole:
     def in_bulk(self, com) -> np.ndarray:
         """Which centres of mass ``com`` lie in the bulk (its area and slab)."""
         slab = self.heights.bulk_slab()
-        return self.region.in_bulk_area(com[:, :2]) & (com[:, 2] >= slab[0]) & (com[:, 2] < slab[1])
+        return self.region.in_bulk_area(com) & (com[:, 2] >= slab[0]) & (com[:, 2] < slab[1])
 
     def contact_tolerance(self) -> float:
         return CONTACT_GAP_TOLERANCE * self.mean_radius
@@ -361,7 +390,7 @@ class Whole:
             return np.zeros(len(com), dtype=bool)
         r_max, slab = shells[1], self.heights.bulk_slab()
         return ((com[:, 2] >= slab[0] + r_max) & (com[:, 2] < slab[1] - r_max)
-                & self.region.in_bulk_area(com[:, :2], r_max))
+                & self.region.in_bulk_area(com, r_max))
 
 
 @dataclass(frozen=True)
@@ -387,7 +416,7 @@ class MeasuredSpheres:
                    np.concatenate([sphere_keys(np.full(n_substrate, whole.n_particles), np.zeros(n_substrate)),
                                    own.sphere_keys()]),
                    np.concatenate([np.full(n_substrate, -1), drops.species[row]]),
-                   np.concatenate([region.in_bulk_area(substrate[0][:, :2]), region.in_bulk_area(own.com[row, :2])]))
+                   np.concatenate([region.in_bulk_area(substrate[0]), region.in_bulk_area(own.com[row])]))
 
 
 def measure(params, result, species, drops, geometry, skip, substrate) -> dict:
@@ -430,8 +459,10 @@ def measuring_region(params, geometry, lowest_xy, highest_xy, largest_radius, di
         polygon = 0.5 * sides * radius**2 * math.sin(2.0 * math.pi / sides)
         return Region(geometry.lower, geometry.upper, False, True, polygon / (2.0 * radius) ** 2, wall_distance,
                       (x, y, radius * math.cos(math.pi / sides)))
-    if params["container"] == "mesh":  # its section changes with height: no packing profile of a constant area
-        return Region(geometry.lower, geometry.upper, False, False)
+    if params["container"] == "mesh":
+        inside = geometry.vessel.convex_inside()
+        return Region(geometry.lower, geometry.upper, False, True, wall_distance=wall_distance, inside=inside,
+                      bulk_inside=inside.shrunk(wall_distance))
     if params["lateral"] == "walls":
         return Region(geometry.lower, geometry.upper, False, True, wall_distance=wall_distance)
     if params["lateral"] == "periodic":
@@ -597,16 +628,17 @@ def _packing(whole, parts) -> dict:
     volumes = np.sum(np.stack([part["packing"] for part in parts]), axis=0)
     profile = whole.profile_slabs()
     slab = whole.heights.bulk_slab()
-    box_area = float(np.prod(region.upper - region.lower))
-    layers = box_area * (profile[:, 1] - profile[:, 0]) * region.inside_fraction
-    thickness = slab[1] - slab[0]
+    layers = region.layer_volumes(profile)
     if region.periodic:
-        fraction = volumes[0] / (box_area * thickness) / region.inside_fraction
+        fraction = volumes[0] / region.layer_volumes(np.array([slab]))[0]
     else:
         # the spheres of the particles in the bulk's area, each with its whole horizontal extent, over that
         # area: unbiased for a packing statistically uniform across it (the selected centres are as dense as
-        # all centres: Campbell's theorem)
-        fraction = volumes[0] / (region.bulk_area() * thickness) if region.bulk_area() > 0.0 else np.nan
+        # all centres: Campbell's theorem); in a vessel, whose bulk's section changes with height, unbiased
+        # where that section's area is linear in z over a particle's height (quadratic terms leave a bias
+        # of order (particle height / vessel width)^2)
+        bulk = region.bulk_volume(*slab)
+        fraction = volumes[0] / bulk if bulk > 0.0 else np.nan
     return {"bulk_packing_fraction": float(fraction), "packing_profile": volumes[1:bins + 1] / layers,
             "species_packing_profile": volumes[bins + 1:].reshape(n_species, bins) / layers}
 
@@ -660,7 +692,7 @@ def rdf_shells(params, diameter, region):
     usable = bins
     if region.periodic:
         usable = min(bins, int(0.5 * float(np.min(region.upper - region.lower)) / width))
-    return (usable, usable * width) if usable > 0 and region.bulk_area() > 0.0 else None
+    return (usable, usable * width) if usable > 0 and region.has_bulk() else None
 
 
 def _radial_distribution(whole, total) -> np.ndarray:
@@ -672,7 +704,7 @@ def _radial_distribution(whole, total) -> np.ndarray:
     if shells is not None and references:
         slab = whole.heights.bulk_slab()
         g[:shells[0]] = structure.shell_density(total("shell_counts"), references, whole.n_bulk,
-                                                whole.region.bulk_area() * (slab[1] - slab[0]), shells[1])
+                                                whole.region.bulk_volume(*slab), shells[1])
     return g
 
 

@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parsim.deposition.inside import ConvexInside
 from parsim.errors import JobError
 
 __all__ = ["Vessel", "read_vessel", "vessel_from_mesh", "hopper_mesh", "v_trough_mesh", "box_mesh",
@@ -109,6 +110,11 @@ class Vessel:
             ok &= (points[:, axis] >= radii) & (points[:, axis] <= self.upper[axis] - radii)
         return ok & (points[:, 2] >= radii)
 
+    def convex_inside(self) -> ConvexInside:
+        """The inside continued above the rim, as the kernel takes it: the box's walls, the floor and
+        the faces' planes (:class:`parsim.deposition.inside.ConvexInside`)."""
+        return ConvexInside(self.normals, self.levels, np.zeros(2), np.array(self.upper[:2], dtype=np.float64))
+
     def inside_opening(self, xy, margin=0.0):
         """Whether each point ``xy`` (k, 2) lies inside the opening shrunk by ``margin`` (scalar or
         (k,)): inside the rim polygon and at least ``margin`` from each of its edges."""
@@ -130,31 +136,11 @@ def _distance_to_edges(xy, start, end):
     return np.min(np.linalg.norm(xy[:, None, :] - foot, axis=2), axis=1)
 
 
-def _clip(polygon, a, b):
-    """The convex polygon (m, 2) clipped to the half-plane ``a . p >= b`` (Sutherland-Hodgman)."""
-    s = polygon @ a - b
-    keep = s >= 0.0
-    if keep.all() or not keep.any():
-        return polygon if keep.all() else polygon[:0]
-    following, t = np.roll(polygon, -1, axis=0), np.roll(s, -1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        crossing = polygon + (following - polygon) * (s / (s - t))[:, None]
-    points = np.stack([polygon, crossing], axis=1).reshape(-1, 2)  # each vertex, then its edge's crossing
-    return points[np.stack([keep, keep != (t >= 0.0)], axis=1).ravel()]
-
-
 def _section_area(vessel, z):
-    """Shoelace area of the box's rectangle clipped by every face's half-plane at height ``z``."""
+    """Area of the box's rectangle clipped by every face's half-plane at height ``z``, up to the rim."""
     if z < 0.0 or z > vessel.upper[2]:
         return 0.0
-    lx, ly = vessel.upper[0], vessel.upper[1]
-    polygon = np.array([[0.0, 0.0], [lx, 0.0], [lx, ly], [0.0, ly]])
-    for normal, level in zip(vessel.normals, vessel.levels):
-        polygon = _clip(polygon, normal[:2], level - normal[2] * z)
-    if len(polygon) < 3:
-        return 0.0
-    x, y = polygon[:, 0], polygon[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    return vessel.convex_inside().area_at(z)
 
 
 def _slab_volume(vessel, low, high):
