@@ -170,3 +170,37 @@ def test_packing_in_a_hopper_is_the_spheres_volume_over_the_vessels(tmp_path):
     phi = (_slab_volumes(position[in_region], radius[in_region], low, high)
            / facet_volume(inside.shrunk(distance), low, high))
     assert statistics["bulk_packing_fraction"] == pytest.approx(phi, rel=1e-9)
+
+
+def test_a_drop_disc_pours_a_heap_where_it_lies(tmp_path):
+    """Poured over the whole opening of a hopper with frictionless faces, 400 spheres leave a crater (those
+    sliding down the faces pile up against them); poured through a disc of radius 1 at the opening's
+    centroid they heap up on the axis, and through a disc near one face, at that face."""
+    from tests.mesh_files import write
+
+    path = write(hopper_mesh(10.0, 6.0, 6.0, 8), tmp_path, "hopper.obj")
+    axis = read_vessel(path).opening_centroid()
+    np.testing.assert_allclose(axis, 10.0 * np.cos(np.pi / 8.0), rtol=1e-12)  # the apothem: the box's middle
+
+    def top(extra):
+        container = f'container = "mesh"\ncontainer_file = "{path}"{extra}'
+        position = _solved(tmp_path, "poured", container, 5, shape="sphere", n_particles=400).configuration.arrays[
+            "spheres/position"]
+        return position[np.argsort(position[:, 2])[-10:]]
+
+    assert np.all(np.hypot(*(top("")[:, :2] - axis).T) > 5.0)
+    central = top("\ndrop_area_radius = 1.0")
+    assert np.all(np.hypot(*(central[:, :2] - axis).T) < 2.0) and central[:, 2].min() > 6.0  # above the rim
+    aside = top(f"\ndrop_area_radius = 1.5\ndrop_area_x = 4.0\ndrop_area_y = {axis[1]}")
+    assert np.all(np.hypot(aside[:, 0] - 4.0, aside[:, 1] - axis[1]) < 2.5)
+
+
+def test_a_drop_disc_out_of_the_opening_or_without_its_radius_is_refused(tmp_path):
+    box_mesh(9.0, 9.0, 12.0).export(tmp_path / "box.stl")
+    vessel = f'container = "mesh"\ncontainer_file = "{tmp_path / "box.stl"}"'
+    done, _ = _run(tmp_path, "outside", f"{vessel}\ndrop_area_radius = 2.0\ndrop_area_x = 20.0")
+    assert done.returncode == 2 and "drop_area_radius = 2.0: the drop disc about (20, 4.5) holds no place" in done.stderr
+    done, _ = _run(tmp_path, "centre", f"{vessel}\ndrop_area_y = 3.0")
+    assert done.returncode == 2 and "drop_area_y = 3.0: the centre of the drop disc needs its radius" in done.stderr
+    done, _ = _run(tmp_path, "radius", f"{vessel}\ndrop_area_radius = -1.0")
+    assert done.returncode == 2 and "drop_area_radius = -1.0 is out of range" in done.stderr

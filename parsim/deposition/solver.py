@@ -78,6 +78,7 @@ MAX_SIZE_SPREAD = 3.0  # lognormal: factors exp(+-6 x 3) span 15 decades of volu
 MAX_PROFILE_BINS = 10_000
 MAX_PACKING_SAMPLES = 10_000_000  # per slab: QMC error ~1e-6 already at 10^5-10^6
 MAX_SHARE = 1e9  # shares are normalised; a species of one part in 10^9 is absent from any sediment
+DROP_ATTEMPTS = 1000  # draws of a drop point in a vessel's opening before the particle is reported
 MAX_HEAP_EXTENTS = 1e6  # drop_radius in particle extents: a heap wider than that is no heap
 
 @dataclass(frozen=True)
@@ -197,6 +198,15 @@ PARAMETERS = (
               "the top, its inside convex, no face overhanging; moved so that its bounding box starts at the origin, "
               "in the job's length units; particles are dropped inside its opening", is_file=True,
               read_when=_VESSEL),
+    Parameter("drop_area_radius", float, None, LENGTH_UNITS, "with container = mesh: particles are released "
+              "uniformly over the part of the disc of this radius about (drop_area_x, drop_area_y) that lies in the "
+              "vessel's opening, each whole particle inside it; unset: over the whole opening", low=0.0,
+              low_inclusive=False, high=LARGEST_QUANTITY, read_when=_VESSEL),
+    Parameter("drop_area_x", float, None, LENGTH_UNITS, "x of the drop disc's centre, in the vessel's coordinates "
+              "(its bounding box from the origin); unset: the centroid of the opening", low=-LARGEST_QUANTITY,
+              high=LARGEST_QUANTITY, read_when=_VESSEL),
+    Parameter("drop_area_y", float, None, LENGTH_UNITS, "y of the drop disc's centre (see drop_area_x)",
+              low=-LARGEST_QUANTITY, high=LARGEST_QUANTITY, read_when=_VESSEL),
     Parameter("box_length", float, 50.0, LENGTH_UNITS, "side of the square bottom [0, box_length]^2 "
               "(periodic or walled)", low=0.0, low_inclusive=False, high=LARGEST_QUANTITY, read_when=_BOXED),
     Parameter("lateral", str, "periodic", "1", "lateral boundaries of the box: periodic, walls (four rigid vertical "
@@ -336,11 +346,40 @@ def _check_cylinder(params: dict, species: tuple[Species, ...], sizes: _Sizes) -
 
 
 def _check_vessel(params: dict, vessel, sizes: _Sizes) -> None:
-    """The largest particle fits through the vessel's opening: some point of it lies an extent from its rim."""
+    """The largest particle fits through the vessel's opening (some point of it lies an extent from its rim),
+    and through the drop disc's part of it."""
     grid = np.stack(np.meshgrid(*(np.linspace(0.0, u, 201) for u in vessel.upper[:2])), axis=-1).reshape(-1, 2)
-    if not np.any(vessel.inside_opening(grid, sizes.extent)):
+    usable = vessel.inside_opening(grid, sizes.extent)
+    if not np.any(usable):
         raise JobError(f"container_file = {params['container_file']!r}: the vessel's opening is too narrow for the "
                        f"particles ({sizes.widest}); allowed: an opening wider than twice the particle extent")
+    for key in ("drop_area_x", "drop_area_y"):
+        if params[key] is not None and params["drop_area_radius"] is None:
+            raise JobError(f"{key} = {params[key]!r}: the centre of the drop disc needs its radius: set "
+                           "drop_area_radius too, or leave both unset to drop over the whole opening")
+    area = drop_area(params, vessel)
+    if area is None:
+        return
+    centre, radius = area
+    disc = _on_disc(np.stack(np.meshgrid(np.linspace(0.0, 1.0, 101), np.linspace(0.0, 1.0, 101)),
+                             axis=-1).reshape(-1, 2), radius, centre)
+    if not np.any(vessel.inside_opening(disc, sizes.extent)):
+        raise JobError(f"drop_area_radius = {radius!r}: the drop disc about ({centre[0]:.6g}, {centre[1]:.6g}) holds "
+                       f"no place in the vessel's opening at least the particle extent {sizes.extent:.6g} from its "
+                       "rim; allowed: a disc that reaches that far into the opening (the vessel's bounding box runs "
+                       f"from (0, 0) to ({vessel.upper[0]:.6g}, {vessel.upper[1]:.6g}))")
+
+
+def drop_area(params: dict, vessel) -> tuple | None:
+    """The drop disc of a mesh vessel's job, ((x, y), radius), its centre the opening's centroid unless given;
+    None when the job drops over the whole opening."""
+    radius = params["drop_area_radius"]
+    if radius is None:
+        return None
+    centroid = vessel.opening_centroid()
+    given = (params["drop_area_x"], params["drop_area_y"])
+    centre = [centroid[k] if given[k] is None else given[k] for k in range(2)]
+    return (float(centre[0]), float(centre[1])), float(radius)
 
 
 def _check_heap(params: dict, sizes: _Sizes) -> None:
@@ -657,7 +696,8 @@ def _drop_positions(params, geometry, species, drops, rng):
             raise NumericalError(f"a particle of size factor {drops.scale.max():.4g} does not fit in the cylinder")
         return _on_disc(rng.random((n, 2)), reach, (cx, cy))
     if geometry.vessel is not None:
-        return _in_opening(geometry.vessel, extents[drops.species] * drops.scale, rng)
+        margins = extents[drops.species] * drops.scale
+        return _in_opening(geometry.vessel, margins, rng, drop_area(params, geometry.vessel))
     if params["lateral"] == "none":
         return _on_disc(rng.random((n, 2)), params["drop_radius"], (0.0, 0.0))
     length = params["box_length"]
@@ -669,21 +709,27 @@ def _drop_positions(params, geometry, species, drops, rng):
     return rng.random((n, 2)) * length
 
 
-def _in_opening(vessel, margins, rng):
+def _in_opening(vessel, margins, rng, area=None):
     """Points uniform over a vessel's opening, each at least its ``margin`` from the rim (the whole particle
     starts inside, whatever its orientation): drawn as between walls, in the bounding box shrunk by the
-    margin, and redrawn where they miss the opening (an opening that is the box's square misses nothing)."""
+    margin, and redrawn where they miss the opening (an opening that is the box's square misses nothing).
+    With a drop ``area`` ((x, y), radius), drawn on its disc and redrawn where they miss the opening."""
     if np.any(2.0 * margins >= np.min(vessel.upper[:2])):
         raise NumericalError(f"a particle of extent {margins.max():.4g} does not fit in the vessel")
     points = np.zeros((len(margins), 2))
     missing = np.arange(len(margins))
-    for _ in range(1000):
+    for _ in range(DROP_ATTEMPTS):
         if not len(missing):
             return points
-        margin = margins[missing, None]
-        points[missing] = margin + rng.random((len(missing), 2)) * (vessel.upper[:2] - 2.0 * margin)
+        if area is None:
+            margin = margins[missing, None]
+            points[missing] = margin + rng.random((len(missing), 2)) * (vessel.upper[:2] - 2.0 * margin)
+        else:
+            points[missing] = _on_disc(rng.random((len(missing), 2)), area[1], area[0])
         missing = missing[~vessel.inside_opening(points[missing], margins[missing])]
-    raise NumericalError(f"a particle of extent {margins.max():.4g} found no place in the vessel's opening")
+    where = "the vessel's opening" if area is None else "the drop disc's part of the vessel's opening"
+    raise NumericalError(f"a particle of extent {margins.max():.4g} found no place in {where} in {DROP_ATTEMPTS} "
+                         "draws")
 
 
 def _on_disc(uniform, radius, centre):

@@ -110,6 +110,14 @@ class Vessel:
             ok &= (points[:, axis] >= radii) & (points[:, axis] <= self.upper[axis] - radii)
         return ok & (points[:, 2] >= radii)
 
+    def opening_centroid(self) -> np.ndarray:
+        """The centroid (x, y) of the opening's area (the rim polygon's)."""
+        x, y = self.opening[:, 0], self.opening[:, 1]
+        following_x, following_y = np.roll(x, -1), np.roll(y, -1)
+        cross = x * following_y - following_x * y
+        moments = np.array([np.sum((x + following_x) * cross), np.sum((y + following_y) * cross)])
+        return moments / (3.0 * np.sum(cross))
+
     def convex_inside(self) -> ConvexInside:
         """The inside continued above the rim, as the kernel takes it: the box's walls, the floor and
         the faces' planes (:class:`parsim.deposition.inside.ConvexInside`)."""
