@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from parsim.core import sdbd
-from parsim.deposition.vessel import hopper_mesh, prism_mesh, v_trough_mesh, vessel_from_mesh
+from parsim.deposition.vessel import bowl_mesh, hopper_mesh, prism_mesh, v_trough_mesh, vessel_from_mesh
 
 R = 0.5
 
@@ -85,12 +85,16 @@ def test_a_sphere_in_a_tilted_v_trough_slides_along_it_to_the_end_wall():
     assert res.state[0] == sdbd.RESTING_THREE_CONTACTS
 
 
-def _random_hopper(rng):
-    sides = int(rng.integers(4, 13))
-    top = float(rng.uniform(3.0, 5.0))
-    vessel = vessel_from_mesh(hopper_mesh(top, float(rng.uniform(0.0, 0.8 * top)), float(rng.uniform(2.0, 6.0)),
-                                          sides))
-    return vessel
+def _random_vessel(rng):
+    """A hopper (4 to 12 sides, steep or shallow, pointed or flat-bottomed) or a bowl (a polyhedral
+    spherical cap, 6 to 16 sides, 2 to 6 rings, as deep as half to all of its sphere's radius)."""
+    if rng.random() < 0.5:
+        top = float(rng.uniform(3.0, 5.0))
+        return vessel_from_mesh(hopper_mesh(top, float(rng.uniform(0.0, 0.8 * top)), float(rng.uniform(2.0, 6.0)),
+                                            int(rng.integers(4, 13))))
+    radius = float(rng.uniform(3.0, 6.0))
+    return vessel_from_mesh(bowl_mesh(radius, float(rng.uniform(0.5, 1.0)) * radius, int(rng.integers(6, 17)),
+                                      int(rng.integers(2, 7)), bottom=float(rng.uniform(0.1, 0.5))))
 
 
 def _random_shape(rng):
@@ -106,15 +110,15 @@ def _random_shape(rng):
     return offsets, np.full(len(offsets), R)
 
 
-def test_random_hoppers_no_sphere_crosses_a_face_and_every_particle_is_reported():
-    """40 random hoppers (4 to 12 sides, steep or shallow, pointed or flat-bottomed), each with 25
+def test_random_hoppers_and_bowls_no_sphere_crosses_a_face_and_every_particle_is_reported():
+    """60 random hoppers and bowls (:func:`_random_vessel`), each with 25
     particles of a random shape, frictionless or glued, the paper's floor or a rolling one: after every
     move no sphere overlaps a face, the floor, a wall or another sphere (the kernel's overlap check),
     every sphere ends inside the vessel, no particle reaches the event limit, and each one's state is
     at rest or hanging on its contacts."""
     rng = np.random.default_rng(20261203)
-    for case in range(40):
-        vessel = _random_hopper(rng)
+    for case in range(60):
+        vessel = _random_vessel(rng)
         offsets, radii = _random_shape(rng)
         extent = float(np.max(np.linalg.norm(offsets, axis=1)) + R)
         n = 25

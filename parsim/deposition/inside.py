@@ -2,13 +2,19 @@
 
 A mesh vessel's inside, continued above its rim (:mod:`parsim.deposition.vessel`), is the set of
 points above the floor ``z >= 0`` within the rectangle ``lower <= (x, y) <= upper`` of its box's
-walls and behind every face, ``N . x >= c`` with inward unit normals ``N`` (``N_z >= 0``).  Its
-section at height ``z`` is the rectangle clipped by the half-planes ``N_xy . p >= c - N_z z``: a
-convex polygon whose sides move linearly with ``z``.  So is every vertex of the polygon, until three
-of its lines (faces' or walls') meet in a point of it, or two opposite lines meet; between such
-heights the section's area is a quadratic of ``z`` and Simpson's rule integrates it exactly.
-:meth:`ConvexInside.volume_between` integrates over the heights where that can happen, found once
-for the whole inside; a height found that changes nothing costs one more Simpson step.
+walls and behind every face, ``N . x >= c`` with inward unit normals ``N`` (``N_z >= 0``): a convex
+polytope, unbounded above.  Its section at height ``z`` is the rectangle clipped by the half-planes
+``N_xy . p >= c - N_z z``, a convex polygon whose vertices move linearly with ``z`` along the
+polytope's edges until they reach one of its vertices.  Between the heights of the polytope's
+vertices the section's area is therefore a quadratic of ``z``, and Simpson's rule integrates it
+exactly (:meth:`ConvexInside.volume_between`).  The vertices are found facet by facet: each plane's
+facet is a large square in the plane clipped by the other half-spaces.  A section's area then comes
+from the facets it cuts, by the divergence theorem in the plane: A(z) = 1/2 sum_f d_f(z) L_f(z), with
+L_f the length of facet f's chord at height z and d_f the signed distance of its line from the origin.
+
+A polygon is clipped by the half-planes it violates most first, and only by those: after at most a
+few cuts per side every other half-plane holds at every vertex, so the cost grows with the sides of
+the result rather than with the vessel's faces.
 
 :meth:`ConvexInside.shrunk` gives the points at least a distance inside every face and wall (not the
 floor): the same planes moved inwards, so the bulk of a sediment in a vessel is measured in a
@@ -19,17 +25,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ConvexInside", "clip_polygon"]
+__all__ = ["ConvexInside", "clip_polygon", "polygon_area"]
 
-#: A height where lines meet is kept when the point lies within this many units of the inside's
-#: size from every other line: generous, since a height kept in vain changes no volume.
-MEETING_RTOL = 1e-7
-#: Triples of lines examined at a time (their feasibility test holds triples x lines floats).
-TRIPLES_PER_CHUNK = 20_000
+#: The polytope's vertices are found up to this height (then higher, if a volume above it is asked),
+#: in units of the walls' rectangle's diagonal above the highest face's lowest point.
+FIRST_CAP_DIAGONALS = 2.0
+#: Vertex heights closer than this times the polytope's size are one height (the same vertex reached
+#: from several facets differs by rounding; a height kept in vain would only cost a Simpson step).
+DISTINCT_HEIGHTS_RTOL = 1e-12
+#: A facet whose normal has a horizontal part below this is horizontal (the floor, the cut): it has no chord.
+HORIZONTAL_RTOL = 1e-12
 
 
 def clip_polygon(polygon, a, b):
-    """The convex polygon (m, 2) clipped to the half-plane ``a . p >= b`` (Sutherland-Hodgman)."""
+    """The convex polygon (m, d) clipped to the half-space ``a . p >= b`` (Sutherland-Hodgman, any d)."""
     s = polygon @ a - b
     keep = s >= 0.0
     if keep.all() or not keep.any():
@@ -37,8 +46,23 @@ def clip_polygon(polygon, a, b):
     following, t = np.roll(polygon, -1, axis=0), np.roll(s, -1)
     with np.errstate(divide="ignore", invalid="ignore"):
         crossing = polygon + (following - polygon) * (s / (s - t))[:, None]
-    points = np.stack([polygon, crossing], axis=1).reshape(-1, 2)  # each vertex, then its edge's crossing
+    points = np.stack([polygon, crossing], axis=1).reshape(-1, polygon.shape[1])  # each vertex, then its crossing
     return points[np.stack([keep, keep != (t >= 0.0)], axis=1).ravel()]
+
+
+def clip_to_all(polygon, normals, levels):
+    """The convex polygon (m, d) clipped to every half-space ``normals[k] . p >= levels[k]``: by the most
+    violated one first, each at most once, until every half-space holds at every vertex."""
+    used = np.zeros(len(levels), dtype=bool)
+    while len(polygon) and not used.all():
+        slack = np.min(polygon @ normals.T - levels, axis=0)
+        slack[used] = np.inf
+        worst = int(np.argmin(slack))
+        if slack[worst] >= 0.0:
+            break
+        polygon = clip_polygon(polygon, normals[worst], levels[worst])
+        used[worst] = True
+    return polygon
 
 
 def polygon_area(polygon) -> float:
@@ -59,7 +83,7 @@ class ConvexInside:
     levels: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
-    _breaks: list = field(default_factory=list, repr=False)  # the heights of :meth:`breaks`, once found
+    _vertices: dict = field(default_factory=dict, repr=False)  # "cap", "heights": the vertex heights found
 
     def shrunk(self, distance: float) -> "ConvexInside":
         """The points at least ``distance`` from every face and wall (the floor stays where it is)."""
@@ -77,104 +101,120 @@ class ConvexInside:
         (x0, y0), (x1, y1) = self.lower, self.upper
         if z < 0.0 or x1 <= x0 or y1 <= y0:
             return np.zeros((0, 2))
-        polygon = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=np.float64)
-        for normal, level in zip(self.normals, self.levels):
-            polygon = clip_polygon(polygon, normal[:2], level - normal[2] * z)
-            if not len(polygon):
-                break
-        return polygon
+        rectangle = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=np.float64)
+        return clip_to_all(rectangle, self.normals[:, :2], self.levels - self.normals[:, 2] * z)
 
     def area_at(self, z: float) -> float:
-        """Area of the section at height ``z``."""
-        return polygon_area(self.section(float(z)))
+        """Area of the section at height ``z`` (0 below the floor), from the chords of the facets."""
+        z = float(z)
+        if z < 0.0:
+            return 0.0
+        self.vertex_heights(z)
+        return self._vertices["chords"].area(z)
 
     def volume_between(self, low: float, high: float) -> float:
-        """Volume of the inside between heights ``low`` and ``high``: Simpson's rule between the
-        heights where the section's area may stop being one quadratic, exact but for rounding."""
+        """Volume of the inside between heights ``low`` and ``high``: Simpson's rule between the heights
+        of the polytope's vertices, where the section's area is one quadratic; exact but for rounding."""
         low, high = max(float(low), 0.0), float(high)
         if high <= low:
             return 0.0
-        inner = [b for b in self.breaks() if low < b < high]
-        edges = np.concatenate([[low], inner, [high]])
+        heights = self.vertex_heights(high)
+        edges = np.concatenate([[low], heights[(heights > low) & (heights < high)], [high]])
         return float(sum((b - a) / 6.0 * (self.area_at(a) + 4.0 * self.area_at(0.5 * (a + b)) + self.area_at(b))
                          for a, b in zip(edges[:-1], edges[1:])))
 
-    def breaks(self) -> np.ndarray:
-        """Heights above the floor where three of the section's lines meet in a point of it, or two
-        opposite lines meet: the only heights where its area stops being one quadratic of z."""
-        if not self._breaks:
-            self._breaks.append(_meeting_heights(*self._lines(), self._size()))
-        return self._breaks[0]
+    def vertex_heights(self, up_to: float) -> np.ndarray:
+        """The distinct heights of the polytope's vertices up to ``up_to`` at least (it is cut above that,
+        and the cut's own vertices are among them)."""
+        if self._vertices.get("cap", -np.inf) < up_to:
+            diagonal = float(np.hypot(*(self.upper - self.lower)))
+            lowest = np.max(self.levels, initial=0.0)
+            cap = max(2.0 * float(up_to), lowest + FIRST_CAP_DIAGONALS * diagonal, 2.0 * self._vertices.get("cap", 0.0))
+            facets = _facets(*self._planes(cap))
+            tolerance = DISTINCT_HEIGHTS_RTOL * max(cap, diagonal)
+            heights = np.unique(np.concatenate([facet[:, 2] for _, facet in facets] + [np.zeros(0)]))
+            heights = heights[np.concatenate([[True], np.diff(heights) > tolerance])] if len(heights) else heights
+            heights[np.abs(heights) <= tolerance] = 0.0  # the floor's vertices, as computed, within rounding of 0
+            self._vertices.update(cap=cap, heights=heights,
+                                  chords=_Chords.of(facets, *self._planes(cap), tolerance))
+        return self._vertices["heights"]
 
-    def _lines(self):
-        """The section's lines ``a . p >= b - m z``: the faces', then the four walls'."""
-        walls = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
-        a = np.concatenate([self.normals[:, :2], walls])
-        b = np.concatenate([self.levels, [self.lower[0], -self.upper[0], self.lower[1], -self.upper[1]]])
-        m = np.concatenate([self.normals[:, 2], np.zeros(4)])
-        return a, b, m
-
-    def _size(self) -> float:
-        return float(np.hypot(*(self.upper - self.lower)))
-
-
-def _meeting_heights(a, b, m, size) -> np.ndarray:
-    """The heights z >= 0 where lines ``a . p = b - m z`` (L, 2), (L,), (L,) meet, three in a point of
-    the section or two opposite ones; only triples with a line that moves (m != 0) can meet at one
-    height alone (three fixed lines meet at every height or at none)."""
-    tolerance = MEETING_RTOL * size
-    heights = [_opposite_meetings(a, b, m)]
-    moving = m != 0.0
-    for i in range(len(b) - 2):
-        j, k = np.triu_indices(len(b) - i - 1, 1)
-        j, k = j + i + 1, k + i + 1
-        triples = np.column_stack([np.full(len(j), i), j, k])[moving[i] | moving[j] | moving[k]]
-        for start in range(0, len(triples), TRIPLES_PER_CHUNK):
-            heights.append(_concurrent_heights(a, b, m, triples[start:start + TRIPLES_PER_CHUNK], tolerance))
-    found = np.concatenate(heights)
-    return np.unique(found[found >= 0.0])
+    def _planes(self, cap: float):
+        """The polytope cut at height ``cap`` as half-spaces ``n . x >= c``: faces, walls, floor, cap."""
+        bounds = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]])
+        levels = [self.lower[0], -self.upper[0], self.lower[1], -self.upper[1], 0.0, -cap]
+        return np.concatenate([self.normals, bounds]), np.concatenate([self.levels, levels])
 
 
-def _opposite_meetings(a, b, m) -> np.ndarray:
-    """Heights where two lines of opposite normals coincide (a V's two faces at its bottom line)."""
-    i, j = np.triu_indices(len(b), 1)
-    cross = a[i, 0] * a[j, 1] - a[i, 1] * a[j, 0]
-    opposite = (np.abs(cross) <= 1e-12) & (np.sum(a[i] * a[j], axis=1) < 0.0)
-    i, j = i[opposite], j[opposite]
-    # a_j = -k a_i: the lines coincide where b_j - m_j z = -k (b_i - m_i z)
-    k = np.linalg.norm(a[j], axis=1) / np.maximum(np.linalg.norm(a[i], axis=1), 1e-300)
-    rate = m[j] + k * m[i]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = (b[j] + k * b[i]) / rate
-    return z[np.isfinite(z) & (rate != 0.0)]
+def _facets(normals, levels) -> list:
+    """The facets of the bounded polytope ``normals . x >= levels``, (plane index, polygon (k, 3)) for each
+    plane that bounds it: a square in the plane larger than the polytope clipped by the other half-spaces."""
+    reach = 4.0 * (float(np.max(np.abs(levels))) + 1.0)  # every vertex lies within |x| <= max |level|
+    facets = []
+    for f, (normal, level) in enumerate(zip(normals, levels)):
+        u = np.cross(normal, [0.0, 0.0, 1.0] if abs(normal[2]) < 0.9 else [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(normal, u)
+        corners = [normal * level + reach * (a * u + b * v) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+        others = np.arange(len(levels)) != f
+        facet = clip_to_all(np.array(corners), normals[others], levels[others])
+        if len(facet) >= 3:
+            facets.append((f, facet))
+    return facets
 
 
-def _concurrent_heights(a, b, m, triples, tolerance) -> np.ndarray:
-    """For each triple of lines, the height where they pass through one point, kept when that point lies
-    within ``tolerance`` of the section (behind every other line)."""
-    if not len(triples):
-        return np.zeros(0)
-    ta, tb, tm = a[triples], b[triples], m[triples]  # (T, 3, 2), (T, 3), (T, 3)
-    # det [a | b - m z] = det[a | b] - z det[a | m], linear in z
-    minors = np.stack([ta[:, 1, 0] * ta[:, 2, 1] - ta[:, 1, 1] * ta[:, 2, 0],
-                       ta[:, 2, 0] * ta[:, 0, 1] - ta[:, 2, 1] * ta[:, 0, 0],
-                       ta[:, 0, 0] * ta[:, 1, 1] - ta[:, 0, 1] * ta[:, 1, 0]], axis=1)
-    d_b, d_m = np.sum(minors * tb, axis=1), np.sum(minors * tm, axis=1)
-    usable = np.abs(d_m) > 1e-12 * np.maximum(np.abs(d_b), 1.0)
-    z = np.where(usable, d_b / np.where(usable, d_m, 1.0), -1.0)
-    # the point: the two of the three lines whose normals are furthest from parallel
-    best = np.argmax(np.abs(minors), axis=1)  # minor r excludes line r
-    rows = np.arange(len(triples))
-    first, second = (best + 1) % 3, (best + 2) % 3
-    a1, a2 = ta[rows, first], ta[rows, second]
-    c1 = tb[rows, first] - tm[rows, first] * z
-    c2 = tb[rows, second] - tm[rows, second] * z
-    det = minors[rows, best]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        point = np.stack([(c1 * a2[:, 1] - c2 * a1[:, 1]) / det, (a1[:, 0] * c2 - a2[:, 0] * c1) / det], axis=1)
-    usable &= np.isfinite(point).all(axis=1) & (z >= 0.0)
-    z, point = z[usable], point[usable]
-    if not len(z):
-        return z
-    slack = point @ a.T - (b[None, :] - z[:, None] * m[None, :])
-    return z[np.all(slack >= -tolerance, axis=1)]
+@dataclass(frozen=True)
+class _Chords:
+    """The edges of the polytope's non-horizontal facets, to cut at a height: ``start``, ``end`` (E, 3) and
+    the facet of each (E,); per facet, its highest point ``top`` (G,), its line's unit direction ``along``
+    (G, 2) (the inside on its left)
+    and ``distance``, ``rate``: the signed distance of its line from the origin, d_f(z) = distance - rate z."""
+
+    start: np.ndarray
+    end: np.ndarray
+    facet: np.ndarray
+    top: np.ndarray
+    along: np.ndarray
+    distance: np.ndarray
+    rate: np.ndarray
+    tolerance: float
+
+    @classmethod
+    def of(cls, facets, normals, levels, tolerance) -> "_Chords":
+        slanted = [(f, polygon) for f, polygon in facets if np.hypot(*normals[f, :2]) > HORIZONTAL_RTOL]
+        starts, ends, owner = [np.zeros((0, 3))], [np.zeros((0, 3))], [np.zeros(0, dtype=np.int64)]
+        for g, (_, polygon) in enumerate(slanted):
+            starts.append(polygon)
+            ends.append(np.roll(polygon, -1, axis=0))
+            owner.append(np.full(len(polygon), g))
+        index = np.array([f for f, _ in slanted], dtype=np.int64)
+        horizontal = np.hypot(normals[index, 0], normals[index, 1])
+        # the line n_xy . p = c - n_z z at distance (c - n_z z) / |n_xy| along n_xy; walked with the inside
+        # (where n_xy points) on the left, its contribution to 1/2 sum of p x q is minus that distance
+        top = np.array([polygon[:, 2].max() for _, polygon in slanted])
+        return cls(np.concatenate(starts), np.concatenate(ends), np.concatenate(owner), top,
+                   np.column_stack([normals[index, 1], -normals[index, 0]]) / horizontal[:, None],
+                   -levels[index] / horizontal, -normals[index, 2] / horizontal, tolerance)
+
+    def area(self, z: float) -> float:
+        """A(z) = 1/2 sum_f d_f(z) L_f(z) over the facets whose chord at height z has a length, the limit from
+        above: at a horizontal edge the facet below it, whose chord is the same edge, is left out (the area
+        is continuous above the floor, and at the floor this is the floor's polygon)."""
+        below, above = self.start[:, 2] - z, self.end[:, 2] - z
+        rising = self.top[self.facet] > z + self.tolerance  # edges of facets that go on above z
+        on = (np.abs(below) <= self.tolerance) & rising  # every vertex starts one edge of each of its facets
+        crossing = (((below < -self.tolerance) & (above > self.tolerance))
+                    | ((below > self.tolerance) & (above < -self.tolerance))) & rising
+        if not (on.any() or crossing.any()):
+            return 0.0
+        start, end = self.start[crossing], self.end[crossing]
+        w = (z - start[:, 2]) / (end[:, 2] - start[:, 2])
+        point = np.concatenate([self.start[on, :2], start[:, :2] + w[:, None] * (end[:, :2] - start[:, :2])])
+        facet = np.concatenate([self.facet[on], self.facet[crossing]])
+        position = np.sum(point * self.along[facet], axis=1)
+        first = np.full(len(self.along), np.inf)
+        last = np.full(len(self.along), -np.inf)
+        np.minimum.at(first, facet, position)
+        np.maximum.at(last, facet, position)
+        length = np.where(last > first, last - first, 0.0)
+        return max(float(0.5 * np.sum((self.distance - self.rate * z) * length)), 0.0)  # a point's rounding: 0

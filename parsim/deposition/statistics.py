@@ -173,9 +173,10 @@ class Region:
 
     def has_bulk(self) -> bool:
         """Whether the walls leave room for a bulk (a vessel's inside widens upwards: room at some height is
-        room above the highest height where its section changes)."""
+        room between its two highest vertex heights)."""
         if self.bulk_inside is not None:
-            return self.bulk_inside.area_at(float(self.bulk_inside.breaks().max(initial=0.0)) + 1.0) > 0.0
+            heights = self.bulk_inside.vertex_heights(0.0)
+            return len(heights) > 1 and self.bulk_inside.area_at(0.5 * float(heights[-2] + heights[-1])) > 0.0
         return self.bulk_area() > 0.0
 
     def bulk_area(self) -> float:

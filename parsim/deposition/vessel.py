@@ -46,7 +46,7 @@ import numpy as np
 from parsim.deposition.inside import ConvexInside
 from parsim.errors import JobError
 
-__all__ = ["Vessel", "read_vessel", "vessel_from_mesh", "hopper_mesh", "v_trough_mesh", "box_mesh",
+__all__ = ["Vessel", "read_vessel", "vessel_from_mesh", "hopper_mesh", "bowl_mesh", "v_trough_mesh", "box_mesh",
            "wedge_mesh", "prism_mesh"]
 
 PLANE_RTOL = 1e-9  # planes agree within this times the bounding-box diagonal
@@ -62,9 +62,8 @@ class Vessel:
     ``normals`` (F, 3), ``levels`` (F,), ``boxes`` (F, 6) (``x0, x1, y0, y1, z0, z1``) are the
     kernel's faces (inward unit normals, the face in ``N . x = c``); ``opening`` (K, 2) is the rim
     polygon, counter-clockwise, at height ``upper[2]``; ``volume`` the volume closed at the rim;
-    ``vertices`` the translated mesh vertices; ``heights`` the distinct vertex heights, between
-    which the cross-section area is a quadratic of z, ``cumulative`` the volumes below them;
-    ``tolerance`` the plane tolerance used."""
+    ``vertices`` the translated mesh vertices; ``tolerance`` the plane tolerance used; its inside,
+    continued above the rim, is :meth:`convex_inside`."""
 
     path: str
     upper: np.ndarray
@@ -74,9 +73,8 @@ class Vessel:
     opening: np.ndarray
     volume: float
     vertices: np.ndarray
-    heights: np.ndarray
     tolerance: float
-    cumulative: np.ndarray = None  # set by vessel_from_mesh
+    interior: ConvexInside = None  # the inside as a polytope, continued above the rim
 
     def faces(self):
         """The kernel's ``(normals, levels, boxes)`` as float64 arrays.  Above the rim the vessel goes
@@ -93,12 +91,12 @@ class Vessel:
 
     def area_at(self, z):
         """Area of the section of the vessel at height ``z`` (0 below the floor and above the rim)."""
-        return _section_area(self, float(z))
+        return self.interior.area_at(z) if z <= self.upper[2] else 0.0
 
     def volume_below(self, z):
         """Volume of the inside below height ``z`` (the whole ``volume`` from the rim up): exact,
         Simpson's rule between vertex heights, where the section area is quadratic."""
-        return _volume_below(self, float(z))
+        return self.interior.volume_between(0.0, min(float(z), float(self.upper[2])))
 
     def inside(self, points, radii):
         """Whether each sphere (centres ``points`` (k, 3), ``radii`` (k,)) lies inside the vessel:
@@ -121,7 +119,7 @@ class Vessel:
     def convex_inside(self) -> ConvexInside:
         """The inside continued above the rim, as the kernel takes it: the box's walls, the floor and
         the faces' planes (:class:`parsim.deposition.inside.ConvexInside`)."""
-        return ConvexInside(self.normals, self.levels, np.zeros(2), np.array(self.upper[:2], dtype=np.float64))
+        return self.interior
 
     def inside_opening(self, xy, margin=0.0):
         """Whether each point ``xy`` (k, 2) lies inside the opening shrunk by ``margin`` (scalar or
@@ -142,36 +140,6 @@ def _distance_to_edges(xy, start, end):
     t = np.clip(np.einsum("kmj,mj->km", xy[:, None, :] - start, edge) / np.sum(edge**2, axis=1), 0.0, 1.0)
     foot = start + t[:, :, None] * edge
     return np.min(np.linalg.norm(xy[:, None, :] - foot, axis=2), axis=1)
-
-
-def _section_area(vessel, z):
-    """Area of the box's rectangle clipped by every face's half-plane at height ``z``, up to the rim."""
-    if z < 0.0 or z > vessel.upper[2]:
-        return 0.0
-    return vessel.convex_inside().area_at(z)
-
-
-def _slab_volume(vessel, low, high):
-    """Volume between heights ``low`` and ``high`` with no vertex strictly between: Simpson's rule, exact."""
-    middle = 0.5 * (low + high)
-    return (high - low) / 6.0 * (_section_area(vessel, low) + 4.0 * _section_area(vessel, middle)
-                                 + _section_area(vessel, high))
-
-
-def _cumulative_volumes(vessel):
-    """The volumes below each of the vessel's vertex heights."""
-    slabs = [_slab_volume(vessel, low, high) for low, high in zip(vessel.heights[:-1], vessel.heights[1:])]
-    return np.concatenate([[0.0], np.cumsum(slabs)])
-
-
-def _volume_below(vessel, z):
-    """Volume below ``z``: the slabs between vertex heights below it (``cumulative``), and a part of the next."""
-    if z <= 0.0:
-        return 0.0
-    if z >= vessel.upper[2]:
-        return float(vessel.cumulative[-1])
-    i = int(np.searchsorted(vessel.heights, z, side="right")) - 1
-    return float(vessel.cumulative[i] + _slab_volume(vessel, vessel.heights[i], z))
 
 
 class _Refusal(Exception):
@@ -214,12 +182,9 @@ def vessel_from_mesh(mesh, path="<mesh>", key="container_file") -> Vessel:
     normals = np.array([face[0] for face in kernel], dtype=np.float64).reshape(-1, 3)
     levels = np.array([face[1] for face in kernel], dtype=np.float64)
     boxes = np.array([_box(vertices[face[2]]) for face in kernel], dtype=np.float64).reshape(-1, 6)
-    heights = _distinct(np.sort(vertices[used, 2]), tol)
-    vessel = Vessel(str(path), upper, normals, levels, boxes, opening, 0.0, vertices[used], heights, tol)
-    cumulative = _cumulative_volumes(vessel)
-    object.__setattr__(vessel, "cumulative", cumulative)
-    object.__setattr__(vessel, "volume", float(cumulative[-1]))
-    return vessel
+    inside = ConvexInside(normals, levels, np.zeros(2), np.array(upper[:2], dtype=np.float64))
+    return Vessel(str(path), upper, normals, levels, boxes, opening, inside.volume_between(0.0, upper[2]),
+                  vertices[used], tol, inside)
 
 
 def _tolerance(coordinates, diagonal):
@@ -239,16 +204,6 @@ def _relative_rounding(values):
         return 0.5 * float(np.finfo(np.float32).eps)
     digits = max(len(Decimal(repr(float(x))).normalize().as_tuple().digits) for x in values)
     return min(0.5 * 10.0 ** (1 - digits), MAX_RELATIVE_ROUNDING)
-
-
-def _distinct(sorted_values, tol):
-    """The sorted values with those within ``tol`` of the previous kept one dropped (first and last kept)."""
-    kept = [sorted_values[0]]
-    for value in sorted_values[1:]:
-        if value - kept[-1] > tol:
-            kept.append(value)
-    kept[-1] = sorted_values[-1]
-    return np.array(kept)
 
 
 def _box(points):
@@ -426,12 +381,33 @@ def hopper_mesh(top_radius, bottom_radius, height, sides, rim=None):
     above it when given.  Side k faces the direction 2 pi k / sides; the axis is at x = y = the larger radius."""
     if sides < 3 or height <= 0.0 or top_radius <= 0.0 or bottom_radius < 0.0 or (rim is not None and rim < 0.0):
         raise ValueError("hopper_mesh: sides >= 3, height > 0, top_radius > 0, bottom_radius >= 0, rim >= 0")
-    centre = max(top_radius, bottom_radius)
-    top = _ring(top_radius, sides, height, centre)
-    apex = [np.array([centre, centre, 0.0])] * sides
-    bottom = _ring(bottom_radius, sides, 0.0, centre) if bottom_radius > 0.0 else apex
-    polygons = [bottom] if bottom_radius > 0.0 else []
-    rings = [bottom, top] + ([_ring(top_radius, sides, height + rim, centre)] if rim else [])
+    radii, heights = [bottom_radius, top_radius], [0.0, height]
+    if rim:
+        radii, heights = radii + [top_radius], heights + [height + rim]
+    return _rings_mesh(radii, heights, sides)
+
+
+def bowl_mesh(radius, depth, sides, rings, bottom=0.1):
+    """A polyhedral spherical bowl: the cap of depth ``depth`` <= ``radius`` of the sphere of ``radius``, its
+    ``rings`` + 1 regular ``sides``-gons inscribed at polar angles from that of a flat bottom of radius
+    ``bottom`` x ``radius`` up to the rim, so that it is convex with no overhang."""
+    if sides < 3 or rings < 1 or not 0.0 < depth <= radius or not 0.0 < bottom < 1.0:
+        raise ValueError("bowl_mesh: sides >= 3, rings >= 1, 0 < depth <= radius, 0 < bottom < 1")
+    first, last = np.arcsin(bottom), np.arccos(1.0 - depth / radius)
+    if last <= first:
+        raise ValueError("bowl_mesh: the bottom must be narrower than the rim")
+    angles = np.linspace(first, last, rings + 1)
+    heights = radius * (np.cos(first) - np.cos(angles))
+    return _rings_mesh(list(radius * np.sin(angles)), list(heights), sides)
+
+
+def _rings_mesh(radii, heights, sides):
+    """Regular ``sides``-gons of ``radii`` at ``heights`` (the first at 0: the bottom, or an apex for radius 0)
+    joined by their sides; the axis at x = y = the largest radius."""
+    centre = max(radii)
+    rings = [_ring(r, sides, z, centre) if r > 0.0 else [np.array([centre, centre, z])] * sides
+             for r, z in zip(radii, heights)]
+    polygons = [rings[0]] if radii[0] > 0.0 else []
     for low, high in zip(rings[:-1], rings[1:]):
         polygons += [[low[k], low[k - 1], high[k - 1], high[k]] for k in range(sides)]
     return _mesh_of_polygons(polygons)
