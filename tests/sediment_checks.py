@@ -27,6 +27,11 @@ its pivot lies at infinity behind the wall, so it adds no rotation of its own (r
 alone is the fall), and with another pivot ``P`` it makes the rotation about the axis through
 ``P`` along the wall's normal.
 
+A mesh vessel's faces ``(normals, levels)`` are planes of any inward normal, walls like the box's:
+a glued face's pivot is the touching sphere's centre; a frictionless one adds the translations of
+the slide, down the face's line of steepest descent and along the line of two frictionless planes
+(faces or walls), and the rotation about the axis through another pivot along its normal.
+
 A cylinder ``(cx, cy, R, n)`` is the regular polygon of ``n`` frictionless planar walls inscribed
 in the circle of radius ``R`` about ``(cx, cy)``, side ``k`` facing the direction
 ``2 pi k / n`` (the engine's model); its spheres must also have their centres within ``R - r``
@@ -122,11 +127,12 @@ def _plane_gaps(x, r, walls):
 def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_xy,
                    box_upper_xy, lateral, floor, wall_contact="frictionless", overlap_tol=1e-9, contact_tol=1e-7,
                    deltas=(1e-7, 1e-6, 1e-5, 1e-4), block_tol=1e-12, max_report=20, cylinder=None,
-                   substrate=None):
+                   substrate=None, faces=None):
     """Problems found in a sediment (see the module docs); an empty list means valid.
     ``wall_contact`` is the wall contact model, "frictionless" or "glued"; ``cylinder``
     ``(cx, cy, R, n_sides)`` replaces the box walls by the cylinder's polygon (LATERAL_WALLS);
-    ``substrate`` ``(positions, radii)`` are fixed spheres below the first particle."""
+    ``substrate`` ``(positions, radii)`` are fixed spheres below the first particle; ``faces``
+    ``(normals, levels)`` a mesh vessel's planes ``N . x - r >= c`` besides the box's walls."""
     if wall_contact not in ("frictionless", "glued"):
         raise ValueError(f"wall_contact must be 'frictionless' or 'glued', got {wall_contact!r}")
     if cylinder is not None and lateral != LATERAL_WALLS:
@@ -140,6 +146,9 @@ def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_
     box = hi - lo
     ell = rad.mean()
     walls = lateral_walls(lateral, lo, hi, cylinder)
+    if faces is not None:
+        walls = (np.concatenate([walls[0], np.asarray(faces[0], float).reshape(-1, 3)]),
+                 np.concatenate([walls[1], np.asarray(faces[1], float)]))
     sub_pos, sub_rad = (np.zeros((0, 3)), np.zeros(0)) if substrate is None else \
         (np.asarray(substrate[0], float).reshape(-1, 3), np.asarray(substrate[1], float))
     n_sub = len(sub_rad)
@@ -219,8 +228,17 @@ def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_
             badp = (pgl < -block_tol * ell) & (pgl < pg0 - 1e-13 * ell)
             return bool(bad.any() or badp.any())
 
-        motions = []  # (name, pivot or None, axis)
-        motions.append(("fall", None, None))
+        motions = []  # (name, pivot or None, axis): a rotation, or with no pivot a translation along axis
+        motions.append(("fall", None, np.array([0.0, 0.0, -1.0])))
+        for k, normal in enumerate(sliding):
+            down = np.array([0.0, 0.0, -1.0]) + normal[2] * normal  # gravity's part along the plane
+            if np.linalg.norm(down) > 1e-9:
+                motions.append((f"slide down plane {k}", None, down / np.linalg.norm(down)))
+            for m in range(k + 1, len(sliding)):
+                line = np.cross(normal, sliding[m])
+                if np.linalg.norm(line) > 1e-9 and abs(line[2]) > 1e-12:
+                    motions.append((f"slide along planes {k},{m}", None, -np.sign(line[2]) * line
+                                    / np.linalg.norm(line)))
         for k, P in enumerate(pivots):
             dv = com - P
             dh = np.hypot(dv[0], dv[1])
@@ -242,8 +260,8 @@ def check_sediment(positions, radii, particle, center_of_mass, state, box_lower_
             free = True
             for dl in deltas:
                 if P is None:
-                    x = a - [0, 0, dl * ell]
-                    zc = com[2] - dl * ell
+                    x = a + dl * ell * axis
+                    zc = com[2] + dl * ell * axis[2]
                 else:
                     x = _rotate(a, P, axis, dl)
                     zc = _rotate(com[None], P, axis, dl)[0, 2]

@@ -13,6 +13,7 @@ import pytest
 
 from parsim.core import sdbd
 from parsim.deposition.vessel import bowl_mesh, hopper_mesh, prism_mesh, v_trough_mesh, vessel_from_mesh
+from tests.sediment_checks import check_sediment
 
 R = 0.5
 
@@ -114,8 +115,10 @@ def test_random_hoppers_and_bowls_no_sphere_crosses_a_face_and_every_particle_is
     """60 random hoppers and bowls (:func:`_random_vessel`), each with 25
     particles of a random shape, frictionless or glued, the paper's floor or a rolling one: after every
     move no sphere overlaps a face, the floor, a wall or another sphere (the kernel's overlap check),
-    every sphere ends inside the vessel, no particle reaches the event limit, and each one's state is
-    at rest or hanging on its contacts."""
+    every sphere ends inside the vessel, no particle reaches the event limit, each one's state is at
+    rest or hanging on its contacts, and the independent check of tests/sediment_checks.py finds every
+    particle at rest: no fall, slide or rotation about its contacts (faces included) lowers it unblocked,
+    and one reported on three contacts has three."""
     rng = np.random.default_rng(20261203)
     for case in range(60):
         vessel = _random_vessel(rng)
@@ -140,6 +143,10 @@ def test_random_hoppers_and_bowls_no_sphere_crosses_a_face_and_every_particle_is
         assert np.all(vessel.inside(res.positions, res.radii - 1e-9)), label
         assert set(res.state.tolist()) <= {sdbd.RESTING_THREE_CONTACTS, sdbd.RESTING_ON_FLOOR, sdbd.HANGING_ONE,
                                            sdbd.HANGING_TWO}, label
+        problems = check_sediment(res.positions, res.radii, res.particle, res.center_of_mass, res.state, (0.0, 0.0),
+                                  vessel.upper[:2], sdbd.LATERAL_WALLS, floor,
+                                  ("frictionless", "glued")[wall], faces=(vessel.normals, vessel.levels))
+        assert not problems, (label, problems)
 
 
 def test_a_trough_read_from_its_mesh_is_the_trough_of_its_planes():

@@ -103,11 +103,14 @@ def test_the_hopper_job_spread_over_two_ranks_is_its_serial_sediment(tmp_path):
 
 
 def test_the_hopper_job_keeps_every_sphere_inside_its_vessel(tmp_path):
-    """Every sphere of the hopper's sediment lies behind every face of the funnel and the collar, and its
-    voxel image counts the space behind the faces as solid: no void voxel outside the vessel, and every
+    """Every sphere of the hopper's sediment lies behind every face of the funnel and the collar, every
+    particle is at rest on its contacts (tests/sediment_checks.py: no fall, slide or rotation lowers it
+    unblocked), and its voxel image counts the space behind the faces as solid: no void voxel outside the vessel, and every
     voxel inside the vessel that no sphere covers is void."""
+    from parsim.core.sdbd import FLOOR_ROLL, LATERAL_WALLS
     from parsim.output.export import read_task
     from parsim.output.voxels import voxelize
+    from tests.sediment_checks import check_sediment
 
     done = subprocess.run([sys.executable, "-m", "parsim.cli", "run", str(REPOSITORY / "jobs" / "hopper.toml"),
                            "--output", str(tmp_path / "hopper")], capture_output=True, text=True, timeout=600,
@@ -119,6 +122,10 @@ def test_the_hopper_job_keeps_every_sphere_inside_its_vessel(tmp_path):
             position, radius = f["spheres/position"][()], f["spheres/radius"][()]
             assert np.all(vessel.inside(position, radius - 1e-9)), task
             assert f.attrs["vessel_volume"] == vessel.volume
+            problems = check_sediment(position, radius, f["spheres/particle"][()], f["particles/center_of_mass"][()],
+                                      f["particles/state"][()], (0.0, 0.0), vessel.upper[:2], LATERAL_WALLS,
+                                      FLOOR_ROLL, "frictionless", faces=(vessel.normals, vessel.levels))
+            assert not problems, (task, problems)
         image = voxelize(read_task(task), 0.5)
         axes = [image.origin[k] + (np.arange(image.void.shape[k]) + 0.5) * image.spacing[k] for k in range(3)]
         centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
