@@ -105,8 +105,8 @@ def test_the_hopper_job_spread_over_two_ranks_is_its_serial_sediment(tmp_path):
 def test_the_hopper_job_keeps_every_sphere_inside_its_vessel(tmp_path):
     """Every sphere of the hopper's sediment lies behind every face of the funnel and the collar, every
     particle is at rest on its contacts (tests/sediment_checks.py: no fall, slide or rotation lowers it
-    unblocked), and its voxel image counts the space behind the faces as solid: no void voxel outside the vessel, and every
-    voxel inside the vessel that no sphere covers is void."""
+    unblocked), and its voxel image counts the space behind the faces as solid: no void voxel outside the
+    vessel, and every voxel inside the vessel that no sphere covers is void."""
     from parsim.core.sdbd import FLOOR_ROLL, LATERAL_WALLS
     from parsim.output.export import read_task
     from parsim.output.voxels import voxelize
@@ -206,8 +206,46 @@ def test_a_drop_disc_out_of_the_opening_or_without_its_radius_is_refused(tmp_pat
     box_mesh(9.0, 9.0, 12.0).export(tmp_path / "box.stl")
     vessel = f'container = "mesh"\ncontainer_file = "{tmp_path / "box.stl"}"'
     done, _ = _run(tmp_path, "outside", f"{vessel}\ndrop_area_radius = 2.0\ndrop_area_x = 20.0")
-    assert done.returncode == 2 and "drop_area_radius = 2.0: the drop disc about (20, 4.5) holds no place" in done.stderr
+    assert done.returncode == 2
+    assert "drop_area_radius = 2.0: the drop disc about (20, 4.5) holds no place" in done.stderr
     done, _ = _run(tmp_path, "centre", f"{vessel}\ndrop_area_y = 3.0")
     assert done.returncode == 2 and "drop_area_y = 3.0: the centre of the drop disc needs its radius" in done.stderr
     done, _ = _run(tmp_path, "radius", f"{vessel}\ndrop_area_radius = -1.0")
     assert done.returncode == 2 and "drop_area_radius = -1.0 is out of range" in done.stderr
+
+
+def test_a_vtk_export_shows_the_vessel_with_its_opening_at_the_rim(tmp_path):
+    """The vessel's walls written beside the spheres, read back by VTK: its surface area is the mesh
+    file's (trimesh), and its only boundary is the opening, one loop at the rim's height."""
+    pytest.importorskip("vtkmodules.vtkIOXML", reason="the readers extra is not installed")
+    import trimesh
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkFiltersCore import vtkFeatureEdges, vtkTriangleFilter
+    from vtkmodules.vtkFiltersCore import vtkMassProperties
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+    from parsim.output.export import VESSEL_SUFFIX, export_output
+
+    mesh_file = REPOSITORY / "jobs" / "data" / "hopper.obj"
+    done, output = _run(tmp_path, "exported", f'container = "mesh"\ncontainer_file = "{mesh_file}"')
+    assert done.returncode == 0, done.stderr
+    written = export_output(output, "vtk", out=tmp_path / "export")
+    (walls,) = [path for path in written if path.name.endswith(VESSEL_SUFFIX)]
+    reader = vtkXMLPolyDataReader()
+    reader.SetFileName(str(walls))
+    reader.Update()
+    triangles = vtkTriangleFilter()
+    triangles.SetInputConnection(reader.GetOutputPort())
+    area = vtkMassProperties()
+    area.SetInputConnection(triangles.GetOutputPort())
+    area.Update()
+    assert area.GetSurfaceArea() == pytest.approx(trimesh.load(mesh_file, force="mesh").area, rel=1e-9)
+    edges = vtkFeatureEdges()
+    edges.SetInputConnection(triangles.GetOutputPort())
+    for feature in ("FeatureEdges", "NonManifoldEdges", "ManifoldEdges"):
+        getattr(edges, f"{feature}Off")()
+    edges.BoundaryEdgesOn()
+    edges.Update()
+    rim = read_vessel(mesh_file).upper[2]
+    boundary = vtk_to_numpy(edges.GetOutput().GetPoints().GetData())
+    np.testing.assert_allclose(boundary[:, 2], rim, rtol=0, atol=1e-9 * rim)

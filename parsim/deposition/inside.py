@@ -139,6 +139,12 @@ class ConvexInside:
                                   chords=_Chords.of(facets, *self._planes(cap), tolerance))
         return self._vertices["heights"]
 
+    def surface(self, height: float) -> list:
+        """The vessel's walls up to ``height``: the polygons (k, 3) of the polytope cut there, but for the
+        cut itself (the opening), floor and walls included; each polygon's vertices in order."""
+        normals, levels = self._planes(height)
+        return [polygon for f, polygon in _facets(normals, levels) if f != len(levels) - 1]
+
     def _planes(self, cap: float):
         """The polytope cut at height ``cap`` as half-spaces ``n . x >= c``: faces, walls, floor, cap."""
         bounds = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]])

@@ -773,6 +773,7 @@ def _configuration(params, geometry, result, species, drops, substrate, comm=Non
         attrs["cylinder"] = list(geometry.cylinder)  # centre x, y, radius, sides of the polygon
     if geometry.vessel is not None:
         attrs["vessel_volume"] = float(geometry.vessel.volume)  # closed at its rim, exact from the mesh
+        attrs["vessel_upper"] = np.asarray(geometry.vessel.upper, dtype=np.float64).tolist()  # the rim at z
         # the faces besides the box's walls and floor, as rows (N_x, N_y, N_z, c): inside is N . x >= c
         attrs["vessel_planes"] = np.column_stack([geometry.vessel.normals, geometry.vessel.levels]).ravel().tolist()
     return Configuration(

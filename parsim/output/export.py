@@ -46,6 +46,10 @@ from parsim.output.voxels import image_grid, write_voxels
 from parsim.version import __version__
 
 EXPORT_FOLDER = "export"
+VESSEL_SUFFIX = "_vessel.vtp"
+"""A ``vtk`` export of a task in a mesh vessel writes the vessel's walls beside its spheres, LABEL + this."""
+VESSEL_MERGE_RTOL = 1e-9
+"""Corners of a vessel's faces closer than this times its size are one point of its surface."""
 REAL = "%.17g"
 """Every float is written with 17 significant digits: it reads back as the same double."""
 
@@ -240,7 +244,46 @@ def write_vtk(task: TaskSpheres, path: Path) -> list[Path]:
         + _vtk_array("connectivity", np.arange(n), "Int64", "%d")
         + _vtk_array("offsets", np.arange(1, n + 1), "Int64", "%d")
         + "</Verts>\n</Piece>\n</PolyData>\n</VTKFile>\n")
+    written = _write_text(path, text)
+    if "vessel_planes" in task.attrs and "vessel_upper" in task.attrs:
+        written += write_vessel_vtk(task, path.with_name(f"{path.stem}{VESSEL_SUFFIX}"))
+    return written
+
+
+def write_vessel_vtk(task: TaskSpheres, path: Path) -> list[Path]:
+    """A mesh vessel's walls as the kernel took them (VTK XML PolyData, one polygon per face, the floor and
+    the box's walls included, up to the rim): the polytope of the task file's ``vessel_planes`` within the
+    box of ``vessel_upper``, so that ParaView shows the sediment in its vessel."""
+    from parsim.deposition.inside import ConvexInside
+
+    planes = np.asarray(task.attrs["vessel_planes"], dtype=np.float64).reshape(-1, 4)
+    upper = np.asarray(task.attrs["vessel_upper"], dtype=np.float64)
+    polygons = ConvexInside(planes[:, :3], planes[:, 3], np.zeros(2), upper[:2]).surface(float(upper[2]))
+    points, connectivity = _shared_corners(np.concatenate(polygons), VESSEL_MERGE_RTOL * float(np.linalg.norm(upper)))
+    offsets = np.cumsum([len(polygon) for polygon in polygons])
+    text = (
+        '<?xml version="1.0"?>\n'
+        '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64">\n<PolyData>\n'
+        f'<Piece NumberOfPoints="{len(points)}" NumberOfVerts="0" NumberOfLines="0" NumberOfStrips="0" '
+        f'NumberOfPolys="{len(polygons)}">\n<Points>\n'
+        + _vtk_array("Points", points, "Float64", f"{REAL} {REAL} {REAL}", components=3)
+        + "</Points>\n<Polys>\n"
+        + _vtk_array("connectivity", connectivity, "Int64", "%d")
+        + _vtk_array("offsets", offsets, "Int64", "%d")
+        + "</Polys>\n</Piece>\n</PolyData>\n</VTKFile>\n")
     return _write_text(path, text)
+
+
+def _shared_corners(corners: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct points of polygon ``corners`` (n, 3), each the first corner within ``tolerance`` of it
+    (a vertex computed from each of its faces differs by rounding), and each corner's point index: polygons
+    that share their corners make one connected surface."""
+    first = np.empty(len(corners), dtype=np.int64)
+    for start in range(0, len(corners), 1024):
+        near = np.linalg.norm(corners[start:start + 1024, None, :] - corners[None, :, :], axis=2) <= tolerance
+        first[start:start + 1024] = np.argmax(near, axis=1)
+    distinct, index = np.unique(first, return_inverse=True)
+    return corners[distinct], index
 
 
 def write_vtk_collection(files: list[Path], path: Path) -> list[Path]:
