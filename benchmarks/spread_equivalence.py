@@ -7,7 +7,9 @@ every key that changes a descent: each shape kind (sphere, rod, four_rods, tripo
 ellipsoid, superellipsoid, an agglomerate file, a mesh: jobs/data/pebble.obj or a generated
 octahedron), size distributions (monodisperse, uniform, lognormal, sieve curves of jobs/data or
 generated), species mixtures by number or volume and their layers, the container (a periodic or
-walled box, a heap on an open floor with its drop radius, a cylinder with its side count), the
+walled box, a heap on an open floor with its drop radius, a cylinder with its side count, a mesh
+vessel: a hopper with or without a collar, a bowl, a V-trough, a prism or a wedge, poured over its
+opening or through a drop disc), the
 floor, the wall contact, a substrate, the trial angle, the cycling criterion and the event limit.
 The container is sized from the particles so that most jobs split into K blocks (blocks wider
 than the default halo); each job takes about a second once the kernels are compiled.
@@ -71,6 +73,8 @@ from parsim.job import parse_job  # noqa: E402
 from parsim.solvers import SOLVERS  # noqa: E402
 from parsim.deposition.solver import deposition_inputs  # noqa: E402
 from parsim.deposition.materials import species_of  # noqa: E402
+from parsim.deposition.vessel import (bowl_mesh, hopper_mesh, prism_mesh, v_trough_mesh,  # noqa: E402
+                                      vessel_from_mesh, wedge_mesh)
 from tests.mpi import kill_session, mpiexec  # noqa: E402
 from tests.sediment_checks import close_pairs  # noqa: E402
 
@@ -95,7 +99,8 @@ box_length = 24.0
 floor = "roll"
 """
 HALO_SCALE = 1.3  # the largest size factor of a job's particles, in typical ones (for the halo's estimate)
-LARGEST = {"box_length": 60.0, "container_radius": 30.0, "drop_radius": 25.0}  # containers at most this wide
+LARGEST = {"box_length": 60.0, "container_radius": 30.0, "drop_radius": 25.0,  # containers at most this wide
+           "vessel_radius": 30.0}
 
 
 # ---------------------------------------------------------------- drawing jobs
@@ -108,6 +113,7 @@ class JobDraw:
         self.rng, self.folder, self.stem = rng, folder, stem
         self.files = 0
         self.seed = int(rng.integers(0, 2**31))  # the job's own seed
+        self.opening_area = None  # a mesh vessel's, once drawn
 
     def text(self) -> str:
         """The job's TOML: particles first, then a container sized from them."""
@@ -188,11 +194,15 @@ class JobDraw:
     # the container
 
     def container(self, sizes: dict) -> dict:
-        """A box (periodic, walls), a heap or a cylinder, mostly wide enough to split into 2-4 blocks."""
+        """A box (periodic, walls), a heap, a cylinder or a mesh vessel, mostly wide enough to split into 2-4
+        blocks."""
         rng = self.rng
         halo, extent = sizes["halo"], sizes["largest_extent"]
-        kind = str(rng.choice(("periodic", "walls", "heap", "cylinder"), p=(0.3, 0.25, 0.2, 0.25)))
+        kind = str(rng.choice(("periodic", "walls", "heap", "cylinder", "vessel"), p=(0.25, 0.2, 0.15, 0.2, 0.2)))
         wide = rng.random() < 0.8
+        if kind == "vessel":
+            size = rng.uniform(*((1.0, 2.6) if wide else (0.6, 1.0))) * halo
+            return self.vessel_keys(self.rounded(max(min(size, LARGEST["vessel_radius"]), 1.5 * extent)), extent)
         if kind == "cylinder":
             key, smallest, split, narrow = "container_radius", 1.05 * extent, (1.0, 2.6), (0.5, 1.0)
         elif kind == "heap":
@@ -210,9 +220,43 @@ class JobDraw:
             keys["substrate"] = self.substrate_file(keys, sizes)
         return keys
 
+    def vessel_keys(self, size: float, extent: float) -> dict:
+        """A random convex vessel about ``size`` wide (a radius), written as OBJ: a hopper with or without a
+        collar, a bowl, a V-trough, a prism or a wedge; frictionless or glued; poured over its opening or
+        through a drop disc about its centroid."""
+        rng = self.rng
+        kind = str(rng.choice(("hopper", "bowl", "trough", "prism", "wedge")))
+        if kind == "hopper":
+            rim = rng.uniform(0.2, 0.6) * size if rng.random() < 0.5 else None
+            mesh = hopper_mesh(size, rng.uniform(0.3, 0.8) * size, rng.uniform(0.5, 1.5) * size,
+                               int(rng.integers(4, 13)), rim=rim)
+        elif kind == "bowl":
+            mesh = bowl_mesh(size, rng.uniform(0.5, 1.0) * size, int(rng.integers(6, 17)), int(rng.integers(2, 6)),
+                             bottom=rng.uniform(0.2, 0.5))
+        elif kind == "trough":
+            mesh = v_trough_mesh(2.0 * size, 2.0 * size * rng.uniform(0.6, 1.0), size * rng.uniform(0.3, 1.0))
+        elif kind == "prism":
+            mesh = prism_mesh(size, size * rng.uniform(0.5, 1.5), int(rng.integers(3, 25)))
+        else:
+            lx, angle = 2.0 * size, rng.uniform(10.0, 40.0)
+            start = rng.uniform(0.0, 0.3) * lx
+            mesh = wedge_mesh(lx, 2.0 * size, (lx - start) * math.tan(math.radians(angle)) + size, angle, start)
+        path = self.path(".obj")
+        mesh.export(path, digits=17)
+        vessel = vessel_from_mesh(mesh)
+        self.opening_area = vessel.area_at(vessel.upper[2])
+        keys = {"container": "mesh", "container_file": str(path)}
+        if rng.random() < 0.4:
+            keys["wall_contact"] = "glued"
+        if rng.random() < 0.3:
+            keys["drop_area_radius"] = self.rounded(max(rng.uniform(0.3, 1.0) * size, 1.5 * extent))
+        return keys
+
     def particle_count(self, sizes: dict, parameters: dict) -> int:
         """About 1-4 layers of particles over the container's floor, 50-600, within SPHERE_BUDGET spheres."""
-        if "box_length" in parameters:
+        if self.opening_area is not None:
+            area = self.opening_area
+        elif "box_length" in parameters:
             area = parameters["box_length"] ** 2
         elif "container_radius" in parameters:
             area = math.pi * parameters["container_radius"] ** 2

@@ -1,7 +1,7 @@
 """A fixed sample of the randomised equivalence search (``benchmarks/spread_equivalence.py``).
 
 The search draws small random deposition jobs over the keys that change a descent (every shape
-kind, size distributions, mixtures and layers, boxes, heaps and cylinders, floors, wall contacts,
+kind, size distributions, mixtures and layers, boxes, heaps, cylinders and mesh vessels, floors, wall contacts,
 substrates, trial angles) and runs each serially and spread over 2 and 3 ranks
 (``deposit_streamed(..., check=True)``): every spread sediment must be the serial one bit for bit,
 without overlaps, errors or hangs.
