@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from parsim.deposition.vessel import bowl_mesh, hopper_mesh, prism_mesh, v_trough_mesh, vessel_from_mesh, wedge_mesh
-from tests.polytopes import facet_volume
+from tests.polytopes import centroid_height, facet_volume
 
 RANDOM_CASES = 300
 
@@ -39,7 +39,8 @@ def _random_vessel(rng):
 def test_volumes_between_heights_equal_the_facet_sums_on_random_vessels():
     """Random hoppers (with and without a collar), V-troughs, wedges, prisms and bowls, shrunk by a random distance,
     between random heights below, across and above the rim: Simpson between the section's break heights
-    equals the divergence theorem over the polytope's facets."""
+    equals the divergence theorem over the polytope's facets, and (every third case) the centroid from the
+    moment of the sections the centroid of the facets' tetrahedra."""
     rng = np.random.default_rng(20261203)
     for case in range(RANDOM_CASES):
         vessel = _random_vessel(rng)
@@ -50,6 +51,9 @@ def test_volumes_between_heights_equal_the_facet_sums_on_random_vessels():
         low, high = np.sort(rng.uniform(-0.1 * top, 1.6 * top, 2))
         expected = facet_volume(inside, low, high)
         assert inside.volume_between(low, high) == pytest.approx(expected, rel=1e-9, abs=1e-9 * top**3), case
+        if expected > 1e-6 * top**3 and case % 3 == 0:
+            centroid = inside.moment_between(low, high) / inside.volume_between(low, high)
+            assert centroid == pytest.approx(centroid_height(inside, low, high), rel=1e-9), case
 
 
 def test_a_vessel_closed_at_its_rim_has_the_volume_of_its_mesh():
@@ -84,3 +88,16 @@ def test_a_prism_has_its_polygons_area_at_every_height():
         area = 0.5 * sides * 9.0 * math.sin(2.0 * math.pi / sides)
         assert inside.volume_between(0.5, 7.0) == pytest.approx(6.5 * area, rel=1e-12)
         assert len(inside.vertex_heights(7.0)) == 2  # vertical faces: vertices on the floor and the cut only
+
+
+def test_the_filled_height_has_the_centre_of_mass_asked_for():
+    """A prism filled to H has its centroid at H / 2; a square funnel's filled height has the centroid of
+    its facets' tetrahedra; the height holding a volume holds it."""
+    prism = vessel_from_mesh(prism_mesh(3.0, 4.0, 7)).convex_inside()
+    assert prism.filled_height(1.7) == pytest.approx(3.4, rel=1e-12)
+    funnel = vessel_from_mesh(hopper_mesh(4.0 * math.sqrt(2.0), 2.0 * math.sqrt(2.0), 6.0, 4)).convex_inside()
+    for centre in (0.5, 2.0, 4.0):  # the last above the rim
+        height = funnel.filled_height(centre)
+        assert centroid_height(funnel, 0.0, height) == pytest.approx(centre, rel=1e-10)
+        half = funnel.height_holding(0.5 * funnel.volume_between(0.0, height), height)
+        assert facet_volume(funnel, 0.0, half) == pytest.approx(0.5 * facet_volume(funnel, 0.0, height), rel=1e-10)

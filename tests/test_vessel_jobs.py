@@ -146,13 +146,14 @@ def _slab_volumes(position, radius, low, high):
 
 
 def test_packing_in_a_hopper_is_the_spheres_volume_over_the_vessels(tmp_path):
-    """600 spheres in an octagonal hopper: each slab's phi(z) is the spheres' volume in it over the vessel's
-    (the divergence theorem over the polytope's facets), and the bulk's phi is the volume in the bulk slab of
+    """600 spheres in an octagonal hopper: the filling height is where the vessel filled uniformly has the
+    spheres' centre of mass (the tetrahedra of its facets), each slab's phi(z) is the spheres' volume in it
+    over the vessel's (the divergence theorem over the polytope's facets), and the bulk's phi is the volume in the bulk slab of
     the spheres whose centres lie 4 diameters inside every face and wall, over that region's volume in the
     slab.  (Frictionless faces leave a crater: the spheres that slide down them pile up against them.)"""
     from parsim.deposition.statistics import BULK_SLAB, BULK_WALL_DIAMETERS, PROFILE_TOP
     from tests.mesh_files import write
-    from tests.polytopes import facet_volume
+    from tests.polytopes import centroid_height, facet_volume
 
     path = write(hopper_mesh(10.0, 6.0, 6.0, 8), tmp_path, "hopper.obj")
     vessel = read_vessel(path)
@@ -162,6 +163,8 @@ def test_packing_in_a_hopper_is_the_spheres_volume_over_the_vessels(tmp_path):
     position, radius = arrays["spheres/position"], arrays["spheres/radius"]
     inside = vessel.convex_inside()
     h = statistics["filling_height"]
+    # the vessel filled uniformly to h has the spheres' centre of mass (equal spheres: their mean height)
+    assert centroid_height(inside, 0.0, h) == pytest.approx(np.mean(position[:, 2]), rel=1e-9)
     edges = np.linspace(0.0, PROFILE_TOP * h, len(statistics["packing_profile"]) + 1)
     expected = [_slab_volumes(position, radius, low, high) / facet_volume(inside, low, high)
                 for low, high in zip(edges[:-1], edges[1:])]

@@ -35,6 +35,8 @@ FIRST_CAP_DIAGONALS = 2.0
 DISTINCT_HEIGHTS_RTOL = 1e-12
 #: A facet whose normal has a horizontal part below this is horizontal (the floor, the cut): it has no chord.
 HORIZONTAL_RTOL = 1e-12
+#: Halvings of the bracket when a height is solved for: 2^-60 of it, below a double's rounding.
+BISECTIONS = 60
 
 
 def clip_polygon(polygon, a, b):
@@ -122,6 +124,42 @@ class ConvexInside:
         edges = np.concatenate([[low], heights[(heights > low) & (heights < high)], [high]])
         return float(sum((b - a) / 6.0 * (self.area_at(a) + 4.0 * self.area_at(0.5 * (a + b)) + self.area_at(b))
                          for a, b in zip(edges[:-1], edges[1:])))
+
+    def moment_between(self, low: float, high: float) -> float:
+        """The first moment of the inside's volume about the floor between heights ``low`` and ``high``,
+        the integral of z A(z): a cubic between vertex heights, which Simpson's rule integrates exactly."""
+        low, high = max(float(low), 0.0), float(high)
+        if high <= low:
+            return 0.0
+        heights = self.vertex_heights(high)
+        edges = np.concatenate([[low], heights[(heights > low) & (heights < high)], [high]])
+        return float(sum((b - a) / 6.0 * (a * self.area_at(a) + 2.0 * (a + b) * self.area_at(0.5 * (a + b))
+                                          + b * self.area_at(b)) for a, b in zip(edges[:-1], edges[1:])))
+
+    def filled_height(self, centre: float) -> float:
+        """The height H to which the inside, filled uniformly from the floor, has its centre of mass at
+        height ``centre`` (H = 2 centre in a constant section).  Its sections widen upwards, so the
+        centroid lies between H / 2 and H: H is found by bisection in [centre, 2 centre]."""
+        low, high = float(centre), 2.0 * float(centre)
+        for _ in range(BISECTIONS):
+            middle = 0.5 * (low + high)
+            volume = self.volume_between(0.0, middle)
+            if volume > 0.0 and self.moment_between(0.0, middle) / volume > centre:
+                high = middle
+            else:
+                low = middle
+        return 0.5 * (low + high)
+
+    def height_holding(self, volume: float, top: float) -> float:
+        """The height below which the inside holds ``volume``, by bisection in [0, ``top``]."""
+        low, high = 0.0, float(top)
+        for _ in range(BISECTIONS):
+            middle = 0.5 * (low + high)
+            if self.volume_between(0.0, middle) > volume:
+                high = middle
+            else:
+                low = middle
+        return 0.5 * (low + high)
 
     def vertex_heights(self, up_to: float) -> np.ndarray:
         """The distinct heights of the polytope's vertices up to ``up_to`` at least (it is cut above that,

@@ -351,11 +351,11 @@ class Whole:
         moment = np.array([exact_sum(*(part[k] for part in column["species_moment"])) for k in range(n_species)])
         volume_total = exact_sum(*(e for part in column["species_volume"] for e in part))
         moment_total = exact_sum(*(e for part in column["species_moment"] for e in part))
-        return cls(params, tuple(species), substrate, measuring_region(params, geometry, np.min(column["low"], axis=0),
-                                                                np.max(column["high"], axis=0), largest, diameter),
-                   pile_heights(volume_total, moment_total, substrate), n_particles, max(column["n_index"]),
-                   mean_radius, diameter, largest, max(column["span"]), np.sum(column["species_count"], axis=0),
-                   volume, moment)
+        region = measuring_region(params, geometry, np.min(column["low"], axis=0), np.max(column["high"], axis=0),
+                                  largest, diameter)
+        heights = pile_heights(volume_total, moment_total, substrate, region.inside)
+        return cls(params, tuple(species), substrate, region, heights, n_particles, max(column["n_index"]), mean_radius,
+                   diameter, largest, max(column["span"]), np.sum(column["species_count"], axis=0), volume, moment)
 
     def counted(self, n_bulk, sampled_caps) -> "Whole":
         """With the number of bulk particles and of sampled overlap caps of every part."""
@@ -472,16 +472,26 @@ def measuring_region(params, geometry, lowest_xy, highest_xy, largest_radius, di
     return Region(lowest_xy - 2.0 * reach, highest_xy + 2.0 * reach, False, False)
 
 
-def pile_heights(volume, moment, substrate) -> Heights:
+def pile_heights(volume, moment, substrate, inside=None) -> Heights:
     """h = 2 z_cm of the particles (their total volume ``volume`` and first moment ``moment`` = sum V z_cm) and
     of the union of the substrate's spheres (section 4.1), and z_b = h V_substrate / (V_substrate +
-    V_particles); the sums exact, correctly rounded."""
+    V_particles); the sums exact, correctly rounded.  In a vessel whose section changes with height
+    (``inside``, a :class:`parsim.deposition.inside.ConvexInside`), h is the height to which the vessel filled
+    uniformly has its centre of mass at z_cm, and z_b the height below which it holds the substrate's share
+    of that filling: both 2 z_cm and h V_substrate / V in a constant section."""
     if not len(substrate[1]):
-        return Heights(2.0 * moment / volume)
-    substrate_volume, substrate_z = union_volume_and_height(*substrate)
-    total = exact_sum([volume, substrate_volume])
-    height = 2.0 * exact_sum([moment, substrate_volume * substrate_z]) / total
-    return Heights(height, height * substrate_volume / total)
+        substrate_volume, total, centre = 0.0, volume, moment / volume
+    else:
+        substrate_volume, substrate_z = union_volume_and_height(*substrate)
+        total = exact_sum([volume, substrate_volume])
+        centre = exact_sum([moment, substrate_volume * substrate_z]) / total
+    if inside is None:
+        return Heights(2.0 * centre, 2.0 * centre * substrate_volume / total)
+    height = inside.filled_height(centre)
+    if not substrate_volume:
+        return Heights(height)
+    return Heights(height, inside.height_holding(inside.volume_between(0.0, height) * substrate_volume / total,
+                                                 height))
 
 
 def packing_cover(whole, spheres, overlapping, lower, upper):
