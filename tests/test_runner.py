@@ -139,6 +139,17 @@ def wait_for_task_files(tasks: Path, count: int, process: subprocess.Popen, seco
         time.sleep(0.01)
 
 
+def ended_after_signal(process: subprocess.Popen, what: str) -> tuple[list[str], str]:
+    """The lines parsim printed, and the whole standard error, of a run that must end within 30 s of the
+    signal ``what`` (else every process of its session is killed and the test fails)."""
+    try:
+        _, stderr = process.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        kill_session(process)
+        raise AssertionError(f"the ranks did not end within 30 s of {what}") from None
+    return [line for line in error_lines(stderr) if not line.startswith("[mpiexec@")], stderr  # not the launcher's
+
+
 @pytest.mark.mpi
 def test_ctrl_c_ends_every_rank_with_one_line_and_resumes(quickstart_two_ranks, tmp_path):
     # Ctrl-C in a terminal signals mpiexec, which forwards SIGINT to every rank.
@@ -149,13 +160,8 @@ def test_ctrl_c_ends_every_rank_with_one_line_and_resumes(quickstart_two_ranks, 
     wait_for_task_files(tmp_path / "tasks", 3, process)
     interrupted = time.monotonic()
     process.send_signal(signal.SIGINT)
-    try:
-        _, stderr = process.communicate(timeout=30)
-    except subprocess.TimeoutExpired:
-        kill_session(process)
-        raise AssertionError("the ranks did not end within 30 s of Ctrl-C") from None
+    lines, stderr = ended_after_signal(process, "Ctrl-C")
     assert time.monotonic() - interrupted < 10
-    lines = [line for line in error_lines(stderr) if not line.startswith("[mpiexec@")]  # the launcher's own notice
     assert process.returncode == 130, stderr
     assert len(lines) == 1 and "Traceback" not in stderr, stderr
     kept = len(list((tmp_path / "tasks").glob("*.h5")))
@@ -204,12 +210,7 @@ def test_a_slow_rank_0_still_gives_one_line(quickstart_two_ranks, tmp_path):
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_task_files(tmp_path / "tasks", 3, process)
     os.killpg(process.pid, signal.SIGTERM)
-    try:
-        _, stderr = process.communicate(timeout=30)
-    except subprocess.TimeoutExpired:
-        kill_session(process)
-        raise AssertionError("the ranks did not end within 30 s of SIGTERM") from None
-    lines = [line for line in error_lines(stderr) if not line.startswith("[mpiexec@")]
+    lines, stderr = ended_after_signal(process, "SIGTERM")
     assert len(lines) == 1 and lines[0].startswith("parsim: stopped by SIGTERM; "), stderr
     assert not (tmp_path / "parsim.lock").exists()
 
@@ -224,13 +225,8 @@ def test_a_signal_to_one_other_rank_alone_ends_the_job_with_its_line(quickstart_
     wait_for_task_files(tmp_path / "tasks", 3, process)
     os.kill(_rank_pids(process.pid)[1], signal.SIGTERM)
     signalled = time.monotonic()
-    try:
-        _, stderr = process.communicate(timeout=30)
-    except subprocess.TimeoutExpired:
-        kill_session(process)
-        raise AssertionError("the ranks did not end within 30 s of SIGTERM to rank 1") from None
+    lines, stderr = ended_after_signal(process, "SIGTERM to rank 1")
     assert time.monotonic() - signalled < 10
-    lines = [line for line in error_lines(stderr) if not line.startswith("[mpiexec@")]
     assert process.returncode != 0
     assert lines == ["parsim: rank 1 got SIGTERM; run the same command to finish"], stderr
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ConvexInside", "clip_polygon", "polygon_area"]
+__all__ = ["ConvexInside"]
 
 #: The polytope's vertices are found up to this height (then higher, if a volume above it is asked),
 #: in units of the walls' rectangle's diagonal above the highest face's lowest point.
@@ -67,14 +67,6 @@ def clip_to_all(polygon, normals, levels):
     return polygon
 
 
-def polygon_area(polygon) -> float:
-    """Shoelace area of a polygon (m, 2); 0 for fewer than three vertices."""
-    if len(polygon) < 3:
-        return 0.0
-    x, y = polygon[:, 0], polygon[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-
-
 @dataclass(frozen=True, eq=False)
 class ConvexInside:
     """Points ``z >= 0``, ``lower <= (x, y) <= upper`` with ``normals . x >= levels`` for every face.
@@ -92,19 +84,13 @@ class ConvexInside:
         return ConvexInside(self.normals, self.levels + distance, self.lower + distance, self.upper - distance)
 
     def contains(self, points, margin=0.0) -> np.ndarray:
-        """Whether each point (k, 3) lies inside, at least ``margin`` from every face and wall."""
+        """Whether each point (k, 3) lies inside, at least ``margin`` (a number, or one per point) from every
+        face and wall."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        margin = np.broadcast_to(np.asarray(margin, dtype=np.float64), (len(points),))[:, None]
         inside = np.all(points @ self.normals.T >= self.levels + margin, axis=1)
         inside &= np.all((points[:, :2] >= self.lower + margin) & (points[:, :2] <= self.upper - margin), axis=1)
         return inside & (points[:, 2] >= 0.0)
-
-    def section(self, z: float) -> np.ndarray:
-        """The section at height ``z``: the walls' rectangle clipped by every face, a polygon (m, 2)."""
-        (x0, y0), (x1, y1) = self.lower, self.upper
-        if z < 0.0 or x1 <= x0 or y1 <= y0:
-            return np.zeros((0, 2))
-        rectangle = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=np.float64)
-        return clip_to_all(rectangle, self.normals[:, :2], self.levels - self.normals[:, 2] * z)
 
     def area_at(self, z: float) -> float:
         """Area of the section at height ``z`` (0 below the floor), from the chords of the facets."""

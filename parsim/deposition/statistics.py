@@ -23,6 +23,7 @@ mean volume-equivalent particle diameters from the walls (:class:`Region`). A pa
 the bulk when its centre of mass is.
 """
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -157,7 +158,7 @@ class Region:
     its axis, ``disc`` = (x, y, r_in) with r_in the inscribed radius of the wall's polygon, so that
     every point of the area is at least ``wall_distance`` from every side.  In a mesh vessel, whose
     section changes with height, the volumes are the vessel's own: ``inside`` is its inside and
-    ``bulk_inside`` the points at least ``wall_distance`` from every face and wall
+    :attr:`bulk_inside` the points at least ``wall_distance`` from every face and wall
     (:class:`parsim.deposition.inside.ConvexInside`), both exact.
     """
 
@@ -169,7 +170,11 @@ class Region:
     wall_distance: float = 0.0
     disc: tuple | None = None
     inside: ConvexInside | None = None
-    bulk_inside: ConvexInside | None = None
+
+    @functools.cached_property
+    def bulk_inside(self) -> ConvexInside | None:
+        """A vessel's inside at least ``wall_distance`` from every face and wall (None for other containers)."""
+        return None if self.inside is None else self.inside.shrunk(self.wall_distance)
 
     def has_bulk(self) -> bool:
         """Whether the walls leave room for a bulk (a vessel's inside widens upwards: room at some height is
@@ -462,8 +467,7 @@ def measuring_region(params, geometry, lowest_xy, highest_xy, largest_radius, di
                       (x, y, radius * math.cos(math.pi / sides)))
     if params["container"] == "mesh":
         inside = geometry.vessel.convex_inside()
-        return Region(geometry.lower, geometry.upper, False, True, wall_distance=wall_distance, inside=inside,
-                      bulk_inside=inside.shrunk(wall_distance))
+        return Region(geometry.lower, geometry.upper, False, True, wall_distance=wall_distance, inside=inside)
     if params["lateral"] == "walls":
         return Region(geometry.lower, geometry.upper, False, True, wall_distance=wall_distance)
     if params["lateral"] == "periodic":

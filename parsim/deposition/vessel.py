@@ -103,10 +103,7 @@ class Vessel:
         behind every face by its radius, within the box's walls and above the floor."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         radii = np.broadcast_to(np.asarray(radii, dtype=np.float64), (len(points),))
-        ok = np.all(points @ self.normals.T >= self.levels + radii[:, None], axis=1)
-        for axis in (0, 1):
-            ok &= (points[:, axis] >= radii) & (points[:, axis] <= self.upper[axis] - radii)
-        return ok & (points[:, 2] >= radii)
+        return self.interior.contains(points, radii) & (points[:, 2] >= radii)
 
     def opening_centroid(self) -> np.ndarray:
         """The centroid (x, y) of the opening's area (the rim polygon's)."""
